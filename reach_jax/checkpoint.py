@@ -1,0 +1,124 @@
+"""Atomic, versioned checkpoints of batched learner pytrees, and the run directory layout.
+
+A checkpoint is one .npz holding every leaf under its pytree path, plus a JSON `__meta__` entry
+(format version, chunk index, learner table). Files are written to a temporary name, fsynced and
+renamed, so a kill at any moment leaves the previous checkpoint readable.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import jax
+import numpy as np
+
+FORMAT_VERSION = 1
+CHECKPOINT_DIR = "checkpoints"
+CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.jsonl"
+KEEP = 2  # newest checkpoints kept on disk
+
+
+class CheckpointError(ValueError):
+    """A checkpoint or run directory that cannot be used; the message names the file and field."""
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write data to path via a fsynced temporary file and a rename."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    _fsync_dir(path.parent)
+
+
+def append_lines(path: Path, lines: list[str]) -> None:
+    """Append whole lines with a single write and fsync, so no line is torn."""
+    with open(path, "ab") as f:
+        f.write("".join(line + "\n" for line in lines).encode())
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _flatten(tree) -> dict[str, np.ndarray]:
+    leaves, _ = jax.tree_util.tree_flatten_with_path(tree)
+    return {jax.tree_util.keystr(path): np.asarray(leaf) for path, leaf in leaves}
+
+
+def checkpoint_path(run_dir: Path, chunk: int) -> Path:
+    """Path of the checkpoint written after `chunk` chunks."""
+    return Path(run_dir) / CHECKPOINT_DIR / f"chunk_{chunk:07d}.npz"
+
+
+def save(run_dir: Path, chunk: int, tree, meta: dict) -> Path:
+    """Atomically write `tree` as the checkpoint after `chunk` chunks; prune old ones."""
+    folder = Path(run_dir) / CHECKPOINT_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    arrays = _flatten(tree)
+    arrays["__meta__"] = np.frombuffer(
+        json.dumps({"format_version": FORMAT_VERSION, "chunk": chunk, **meta}).encode(), dtype=np.uint8
+    )
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    path = checkpoint_path(run_dir, chunk)
+    atomic_write_bytes(path, buf.getvalue())
+    for old in list_checkpoints(run_dir)[:-KEEP]:
+        old.unlink()
+    return path
+
+
+def list_checkpoints(run_dir: Path) -> list[Path]:
+    """Complete checkpoints of a run, oldest first."""
+    folder = Path(run_dir) / CHECKPOINT_DIR
+    if not folder.is_dir():
+        return []
+    return sorted(folder.glob("chunk_*.npz"))
+
+
+def load(path: Path, template) -> tuple[object, dict]:
+    """Read a checkpoint into the structure of `template`; raises CheckpointError naming what is wrong."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise CheckpointError(f"{path}: corrupt or truncated checkpoint ({exc})") from None
+    if "__meta__" not in arrays:
+        raise CheckpointError(f"{path}: field __meta__ missing")
+    try:
+        meta = json.loads(arrays.pop("__meta__").tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise CheckpointError(f"{path}: field __meta__ is not valid JSON") from None
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise CheckpointError(
+            f"{path}: field format_version is {meta.get('format_version')}, expected {FORMAT_VERSION}"
+        )
+    leaves, treedef = jax.tree_util.tree_flatten_with_path(template)
+    restored = []
+    for key_path, leaf in leaves:
+        name = jax.tree_util.keystr(key_path)
+        if name not in arrays:
+            raise CheckpointError(f"{path}: field {name} missing")
+        value = arrays[name]
+        if value.shape != tuple(leaf.shape) or value.dtype != np.dtype(leaf.dtype):
+            raise CheckpointError(
+                f"{path}: field {name} has shape {value.shape} {value.dtype}, "
+                f"expected {tuple(leaf.shape)} {np.dtype(leaf.dtype)}"
+            )
+        restored.append(value)
+    return jax.tree_util.tree_unflatten(treedef, restored), meta

@@ -1,0 +1,192 @@
+"""Every constant of the model, with the paper's values as defaults.
+
+Units: lengths [m], masses [kg], times [s], angles [rad], torques [N m], forces [N].
+Each field names the paper's equation or table, or `SPEC §n` for a choice the paper leaves open.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass, field
+
+CONFIG_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    """Two-link arm of eq. 4-5 and Table 1."""
+
+    mass: tuple[float, float] = (2.0, 2.0)  # M_i [kg], Table 1 (shared by both links, SPEC §1)
+    length: tuple[float, float] = (0.3, 0.3)  # l_i [m], Table 1
+    com_fraction: float = 0.5  # s_i = l_i / 2, Table 1
+    inertia_factor: float = 1.0 / 3.0  # I_i = M_i l_i^2 / 3 about the joint, Table 1
+    joint_viscosity: tuple[float, float] = (0.4, 0.2)  # B_i [N m s/rad], Table 1
+    tau_max: tuple[float, float] = (5.0, 3.0)  # [N m], Table 1
+    dt: float = 0.02  # RK4 step [s], section 4.1
+    theta1_range: tuple[float, float] = (0.0, math.pi / 2)  # leaving it is "out", section 4.2
+    theta2_min: float = 0.0  # below it is "out", section 4.2
+    theta2_stop: float = math.pi  # hard stop, not "out" (SPEC §1 choice)
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """5x5 area-ratio visual sensor (section 4.2, SPEC §2)."""
+
+    n_cells: int = 5  # cells per side, section 4.2
+    cell_size: float = 0.04  # [m], also the hand and target square side (SPEC §2 choice)
+    centre: tuple[float, float] = (-0.05, 0.37)  # field centre [m] in shoulder frame (SPEC §2 choice)
+
+
+@dataclass(frozen=True)
+class EncodingConfig:
+    """Localized (triangular) coding of joint signals (section 4.2, Fig. 3, SPEC §3)."""
+
+    theta_units: tuple[int, int] = (8, 12)  # units for theta1, theta2, section 4.2
+    theta_ranges: tuple[tuple[float, float], tuple[float, float]] = (
+        (0.0, math.pi / 2),
+        (0.0, math.pi),
+    )  # [rad], section 4.2
+    omega_units: int = 10  # units per joint velocity, section 4.2
+    omega_range: float = math.pi  # velocities coded over [-range, range] [rad/s], section 4.2
+    tau_units: int = 10  # units per past torque over [-tau_max, tau_max] (SPEC §3 choice)
+
+
+@dataclass(frozen=True)
+class NetworkConfig:
+    """125-30-10-3 sigmoid network (section 4.2, SPEC §4)."""
+
+    hidden: tuple[int, int] = (30, 10)  # hidden layer widths, section 4.2
+    n_out: int = 3  # critic + 2 actor outputs, section 4.2
+    hidden_init: float = 0.5  # hidden weights ~ U(-a, a) (SPEC §4, §11 choice)
+    output_init: float = 0.0  # output weights ~ U(-a, a); 0 starts critic and actor at 0 (SPEC §11 choice)
+    use_bias: bool = True  # biases start at 0 (SPEC §4 choice)
+
+
+@dataclass(frozen=True)
+class LearnerConfig:
+    """TS actor-critic, eq. 1-3 (SPEC §5). Per-learner copies of lr, noise and lam allow sweeps."""
+
+    p_range: float = 0.8  # P_range of eq. 1
+    reward_goal: float = 0.4  # reinforcement at the goal, section 4.2
+    reward_out: float = -0.4  # reinforcement at a joint limit, section 4.2
+    lam: float = 0.999  # lambda of eq. 3 (SPEC §11 choice)
+    n_max_init: float = 100.0  # N_max[0] [steps] (choice)
+    lr: float = 1.0  # SGD learning rate on squared error (SPEC §11 choice)
+    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (SPEC §11 choice)
+    critic_floor: float = -0.4  # non-terminal critic targets never go below it: anti-collapse guard (choice)
+
+
+@dataclass(frozen=True)
+class TaskConfig:
+    """Goal, curriculum, target drift and trial cap (section 4.2, SPEC §5)."""
+
+    goal_half_width_cells: float = 1.0  # goal square side is 2 cells, section 4.2 / Fig. 4
+    goal_speed: float = 0.1  # hand speed must be below it [m/s], section 4.2
+    curriculum_init_cells: float = 1.6  # initial max start-target L-inf distance [cells] (SPEC §11 choice)
+    curriculum_step: float = 0.0004  # staircase step [m] (SPEC §11 choice)
+    target_candidates: int = 4  # draws to find a target not touched at the start (choice)
+    drift_after: float = 1.0  # target starts drifting after this long in a trial [s] (SPEC §11 choice)
+    drift_per_step: float = 0.002  # drift toward the hand [m/step] (SPEC §11 choice)
+    max_trial_time: float = 10.0  # safety cap on a learning trial [s] (SPEC §5 choice)
+
+
+@dataclass(frozen=True)
+class ForceConfig:
+    """External hand forces (section 4.3, SPEC §6)."""
+
+    viscous: tuple[tuple[float, float], tuple[float, float]] = (
+        (-10.1, -11.2),
+        (-11.2, 11.1),
+    )  # B [N s/m] of Shadmehr & Mussa-Ivaldi 1994, F = B xdot
+    random_amplitude: float = 8.0  # Fx, Fy ~ U(-a, a) per trial [N], section 4.3
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """Table 2 test protocol (section 4.4, SPEC §8)."""
+
+    lattice: int = 8  # lattice points per side, section 4.4
+    max_time: float = 4.0  # a test trial fails after this long [s], section 4.4
+
+
+CONDITIONS = ("none", "viscous", "random", "random_nopast")  # Table 2 rows
+TEST_CONDITIONS = ("none", "viscous")  # Table 2 columns
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One training run: which learners, how long, how it is chunked."""
+
+    trials: int = 2_000_000  # trials per learner, section 4.4
+    seeds: int = 2  # networks per condition, section 4.4
+    conditions: tuple[str, ...] = CONDITIONS  # learning conditions, Table 2 rows
+    seed: int = 0  # master PRNG seed
+    chunk_steps: int = 5000  # learner steps per compiled chunk; checkpoint and log between chunks
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole model and run."""
+
+    arm: ArmConfig = field(default_factory=ArmConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    encoding: EncodingConfig = field(default_factory=EncodingConfig)
+    network: NetworkConfig = field(default_factory=NetworkConfig)
+    learner: LearnerConfig = field(default_factory=LearnerConfig)
+    task: TaskConfig = field(default_factory=TaskConfig)
+    force: ForceConfig = field(default_factory=ForceConfig)
+    eval: EvalConfig = field(default_factory=EvalConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+
+def to_dict(config: Config) -> dict:
+    """Config as a JSON-ready dict, with the config version."""
+    return {"version": CONFIG_VERSION, **dataclasses.asdict(config)}
+
+
+def _tuplify(value):
+    if isinstance(value, list):
+        return tuple(_tuplify(v) for v in value)
+    return value
+
+
+def from_dict(data: dict) -> Config:
+    """Rebuild a Config from `to_dict` output; raises ValueError naming a bad or unknown field."""
+    data = dict(data)
+    version = data.pop("version", None)
+    if version != CONFIG_VERSION:
+        raise ValueError(f"version: expected {CONFIG_VERSION}, found {version}")
+    sections = {}
+    for f in dataclasses.fields(Config):
+        cls = f.default_factory
+        raw = data.pop(f.name, {})
+        if not isinstance(raw, dict):
+            raise ValueError(f"{f.name}: expected an object")
+        names = {g.name for g in dataclasses.fields(cls)}
+        unknown = set(raw) - names
+        if unknown:
+            raise ValueError(f"{f.name}.{sorted(unknown)[0]}: unknown field")
+        sections[f.name] = cls(**{k: _tuplify(v) for k, v in raw.items()})
+    if data:
+        raise ValueError(f"{sorted(data)[0]}: unknown field")
+    return Config(**sections)
+
+
+def to_json(config: Config) -> str:
+    """Config as indented JSON text."""
+    return json.dumps(to_dict(config), indent=2)
+
+
+def n_inputs(config: Config) -> int:
+    """Number of network inputs implied by the sensor and encoding (125 for the paper)."""
+    e = config.encoding
+    now = sum(e.theta_units) + 2 * e.omega_units
+    return config.sensor.n_cells**2 + 2 * now + 2 * e.tau_units
+
+
+def n_past_inputs(config: Config) -> int:
+    """Number of one-step-before inputs withheld by the no-past ablation (60 for the paper)."""
+    e = config.encoding
+    return sum(e.theta_units) + 2 * e.omega_units + 2 * e.tau_units

@@ -1,0 +1,59 @@
+"""The 125-30-10-3 actor-critic network (section 4.2, SPEC §4), on flax.
+
+Units: inputs are coded signals in [0, 1]; every neuron outputs f(u) = sigmoid(u) - 0.5 in (-0.5, 0.5).
+Output 0 is the critic p; outputs 1-2 are the actor m, mapped to torques [N m] by `torque`.
+"""
+
+from __future__ import annotations
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from reach_jax.config import Config, NetworkConfig, n_inputs
+
+
+def squash(u: jax.Array) -> jax.Array:
+    """The paper's neuron output f(u) = 1 / (1 + exp(-u)) - 0.5."""
+    return jax.nn.sigmoid(u) - 0.5
+
+
+def symmetric_uniform(scale: float):
+    """Initializer drawing from U(-scale, scale)."""
+
+    def init(key, shape, dtype=jnp.float32):
+        return jax.random.uniform(key, shape, dtype, -scale, scale)
+
+    return init
+
+
+class ActorCritic(nn.Module):
+    """Layered sigmoid network; all outputs share the hidden layers."""
+
+    cfg: NetworkConfig
+
+    @nn.compact
+    def __call__(self, x: jax.Array) -> jax.Array:
+        for width in self.cfg.hidden:
+            x = squash(
+                nn.Dense(width, use_bias=self.cfg.use_bias, kernel_init=symmetric_uniform(self.cfg.hidden_init))(x)
+            )
+        return squash(
+            nn.Dense(self.cfg.n_out, use_bias=self.cfg.use_bias, kernel_init=symmetric_uniform(self.cfg.output_init))(x)
+        )
+
+
+def init_params(key: jax.Array, cfg: Config):
+    """Fresh parameter pytree for one network."""
+    return ActorCritic(cfg.network).init(key, jnp.zeros(n_inputs(cfg)))
+
+
+def apply(params, x: jax.Array, cfg: Config) -> jax.Array:
+    """Network outputs (..., 3) [critic, actor1, actor2] for inputs (..., 125)."""
+    return ActorCritic(cfg.network).apply(params, x)
+
+
+def torque(m: jax.Array, rnd: jax.Array, cfg: Config) -> jax.Array:
+    """tau_i = 2 tau_max_i (m_i + rnd_i), clipped to +-tau_max_i: (2,) actor + noise -> (2,) [N m]."""
+    tau_max = jnp.asarray(cfg.arm.tau_max)
+    return jnp.clip(2.0 * tau_max * (m + rnd), -tau_max, tau_max)

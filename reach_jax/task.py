@@ -1,0 +1,140 @@
+"""The reaching task: conditions, trial sampling, goal test, target drift and curriculum (SPEC §2, §5, §6).
+
+Units: positions and distances [m], speeds [m/s], forces [N], field matrices [N s/m], time [s].
+Randomness enters only through uniform draws in [0, 1) (`TrialDraws`), so a NumPy oracle can replay a run.
+The curriculum distance d bounds the start-target offset in each axis (an L-inf box).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from reach_jax import arm, encoding, sensor
+from reach_jax.config import CONDITIONS, Config
+
+
+@struct.dataclass
+class Condition:
+    """One learner's environment and inputs: per-learner data, never a Python branch."""
+
+    field: jax.Array  # (2, 2) viscous field matrix [N s/m]; zeros for none
+    force_amplitude: jax.Array  # () random constant force bound per axis [N]; 0 for none
+    input_mask: jax.Array  # (125,) 1 keeps an input, 0 withholds it
+
+
+def make_condition(name: str, cfg: Config) -> Condition:
+    """Condition for a Table-2 learning or test name: none, viscous, random, random_nopast."""
+    if name not in CONDITIONS:
+        raise ValueError(f"unknown condition {name!r}; choose from {', '.join(CONDITIONS)}")
+    viscous = jnp.asarray(cfg.force.viscous) * float(name == "viscous")
+    amplitude = cfg.force.random_amplitude * float(name.startswith("random"))
+    return Condition(
+        field=viscous,
+        force_amplitude=jnp.asarray(amplitude),
+        input_mask=encoding.input_mask(name != "random_nopast", cfg),
+    )
+
+
+def stack_conditions(names, cfg: Config) -> Condition:
+    """Batch of conditions (leading axis = learner) for a list of names."""
+    conds = [make_condition(n, cfg) for n in names]
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *conds)
+
+
+class TrialDraws(NamedTuple):
+    """Uniform [0, 1) draws that fix a new trial."""
+
+    start: jax.Array  # (2,) start position within the field
+    target: jax.Array  # (K, 2) candidate targets within the curriculum box
+    force: jax.Array  # (2,) constant force
+
+
+def draw_trial(key: jax.Array, cfg: Config) -> TrialDraws:
+    """Fresh uniform draws for one trial."""
+    k1, k2, k3 = jax.random.split(key, 3)
+    return TrialDraws(
+        start=jax.random.uniform(k1, (2,)),
+        target=jax.random.uniform(k2, (cfg.task.target_candidates, 2)),
+        force=jax.random.uniform(k3, (2,)),
+    )
+
+
+def goal_half_width(cfg: Config) -> float:
+    """Half side of the goal square around the target [m]."""
+    return cfg.task.goal_half_width_cells * cfg.sensor.cell_size
+
+
+def touching(hand: jax.Array, target: jax.Array, cfg: Config) -> jax.Array:
+    """True when the hand centre lies inside the goal square (side 2 cells) around the target."""
+    return jnp.all(jnp.abs(hand - target) < goal_half_width(cfg), axis=-1)
+
+
+def goal_reached(hand: jax.Array, hand_vel: jax.Array, target: jax.Array, cfg: Config) -> jax.Array:
+    """Goal of section 4.2: the hand touches the target and its speed is below cfg.task.goal_speed."""
+    return touching(hand, target, cfg) & (jnp.linalg.norm(hand_vel) < cfg.task.goal_speed)
+
+
+def place_trial(draws: TrialDraws, distance: jax.Array, amplitude: jax.Array, cfg: Config):
+    """Start state, target and force of a new trial.
+
+    The start is uniform over the field. Each target candidate is uniform over the field intersected
+    with the box of half side `distance` around the start; the first that the hand does not already
+    touch is taken (the last one if all do).
+
+    Args:
+      draws: uniform draws of the trial.
+      distance: () curriculum distance [m].
+      amplitude: () random force bound [N].
+      cfg: model config.
+
+    Returns:
+      ((4,) start arm state at rest, (2,) target [m], (2,) constant force [N]).
+    """
+    lo, hi = (jnp.asarray(b) for b in sensor.field_bounds(cfg.sensor))
+    start = lo + draws.start * (hi - lo)
+    box_lo = jnp.maximum(lo, start - distance)
+    box_hi = jnp.minimum(hi, start + distance)
+    candidates = box_lo + draws.target * (box_hi - box_lo)
+    ok = ~touching(start, candidates, cfg)
+    first = jnp.where(jnp.any(ok), jnp.argmax(ok), cfg.task.target_candidates - 1)
+    target = candidates[first]
+    state = jnp.concatenate([arm.inverse_kinematics(start, cfg.arm), jnp.zeros(2)])
+    force = amplitude * (2.0 * draws.force - 1.0)
+    return state, target, force
+
+
+def drift_target(target: jax.Array, hand: jax.Array, step_in_trial: jax.Array, cfg: Config):
+    """Move the target toward the hand once the trial has lasted cfg.task.drift_after.
+
+    Returns:
+      ((2,) new target [m], () bool whether it moved).
+    """
+    moving = step_in_trial * cfg.arm.dt >= cfg.task.drift_after
+    gap = hand - target
+    dist = jnp.linalg.norm(gap)
+    move = jnp.minimum(cfg.task.drift_per_step, dist)
+    shifted = target + gap * (move / jnp.maximum(dist, 1e-12))
+    moved = moving & (dist > 0)
+    return jnp.where(moved, shifted, target), moved
+
+
+def curriculum_bounds(cfg: Config) -> tuple[float, float]:
+    """(initial and minimum, maximum) curriculum distance [m]; the maximum spans the whole field."""
+    return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
+
+
+def update_curriculum(distance: jax.Array, clean_success: jax.Array, cfg: Config) -> jax.Array:
+    """Staircase: grow after a success without drift, shrink after anything else."""
+    lo, hi = curriculum_bounds(cfg)
+    step = jnp.where(clean_success, cfg.task.curriculum_step, -cfg.task.curriculum_step)
+    return jnp.clip(distance + step, lo, hi)
+
+
+def observe(state, prev_state, prev_tau, target, mask, cfg: Config) -> jax.Array:
+    """Masked (125,) network input from the arm, its previous step and the target."""
+    visual = sensor.render(arm.hand_position(state[:2], cfg.arm), target, cfg.sensor)
+    return encoding.encode(visual, state, prev_state, prev_tau, cfg) * mask

@@ -1,0 +1,339 @@
+"""Training: a pure compiled core over a batch of learners, and an impure shell that runs it in chunks.
+
+`python -m reach_jax.train --trials 2e6 --seeds 2` trains the four Table-2 conditions x 2 seeds as one batch.
+The shell, between compiled chunks, draws the progress bar, appends metrics, writes checkpoints and
+checks that every learner is still finite. Units: trials, steps (of cfg.arm.dt seconds), seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from reach_jax import checkpoint, rollout, task
+from reach_jax.config import CONDITIONS, Config, TrainConfig, from_dict, to_json
+from reach_jax.progress import Progress
+
+EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
+EXIT_NUMERICS = 3  # a learner went non-finite; the last good checkpoint is kept
+EXIT_IO = 4  # a write failed; the last good checkpoint is kept
+
+
+class Batch(NamedTuple):
+    """Everything a chunk needs, learner axis first."""
+
+    states: rollout.LearnerState
+    conds: task.Condition
+    hypers: rollout.Hyper
+
+
+class NumericsError(RuntimeError):
+    """A learner's parameters or state stopped being finite."""
+
+
+def learner_table(train: TrainConfig) -> list[tuple[str, int]]:
+    """(condition, seed index) of every learner, in batch order."""
+    return [(c, s) for c in train.conditions for s in range(train.seeds)]
+
+
+def learner_key(seed: int, index: int) -> jax.Array:
+    """Key of seed index `index`; shared across conditions, so each seed starts from the same weights."""
+    return jax.random.fold_in(jax.random.PRNGKey(seed), index)
+
+
+def init_batch(cfg: Config) -> Batch:
+    """Fresh learners for cfg.train's conditions x seeds."""
+    table = learner_table(cfg.train)
+    conds = task.stack_conditions([c for c, _ in table], cfg)
+    keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
+    states = jax.vmap(lambda k, c: rollout.init_learner(k, c, cfg))(keys, conds)
+    hypers = jax.tree.map(lambda x: jnp.broadcast_to(x, (len(table),)), rollout.default_hyper(cfg))
+    # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
+    return Batch(*jax.tree.map(jnp.copy, (states, conds, hypers)))
+
+
+def make_train(cfg: Config, n_steps: int):
+    """Pure `train(key, cond, hyper) -> LearnerState` for one learner; jit(vmap(train)) trains many."""
+
+    def train(key, cond, hyper):
+        def step_body(state, _):
+            return rollout.learner_step(state, cond, hyper, cfg)[0], None
+
+        state, _ = jax.lax.scan(step_body, rollout.init_learner(key, cond, cfg), None, length=n_steps)
+        return state
+
+    return train
+
+
+@jax.jit
+def finite_learners(states: rollout.LearnerState) -> jax.Array:
+    """(L,) bool: every parameter and arm value of the learner is finite."""
+    leaves = jax.tree.leaves((states.params, states.arm, states.n_max))
+    per_leaf = [jnp.all(jnp.isfinite(x.reshape(x.shape[0], -1)), axis=1) for x in leaves]
+    return jnp.all(jnp.stack(per_leaf), axis=0)
+
+
+def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, cfg: Config) -> list[dict]:
+    """One metrics record per learner for the chunk just run."""
+    s = jax.device_get(states.stats)
+    trials, steps = np.asarray(states.trials), np.asarray(states.steps)
+    distance, n_max = np.asarray(states.distance), np.asarray(states.n_max)
+    rows = []
+    for i, (cond, seed) in enumerate(table):
+        ended = int(s.trials[i])
+        per = (lambda v: float(v[i]) / ended) if ended else (lambda v: None)
+        mean_steps = per(s.trial_steps)
+        rows.append(
+            {
+                "chunk": chunk,
+                "learner": i,
+                "condition": cond,
+                "seed": seed,
+                "trials": int(trials[i]),
+                "steps": int(steps[i]),
+                "chunk_trials": ended,
+                "success_rate": per(s.goals),
+                "out_rate": per(s.outs),
+                "cap_rate": per(s.caps),
+                "drift_rate": per(s.drifted),
+                "mean_trial_steps": mean_steps,
+                "mean_trial_s": None if mean_steps is None else mean_steps * cfg.arm.dt,
+                "distance_m": float(distance[i]),
+                "n_max": float(n_max[i]),
+                "wall_s": round(wall, 3),
+            }
+        )
+    return rows
+
+
+def status_line(rows: list[dict]) -> str:
+    """Recent success rate per condition, for the progress bar."""
+    by_cond: dict[str, list[float]] = {}
+    for r in rows:
+        if r["success_rate"] is not None:
+            by_cond.setdefault(r["condition"], []).append(r["success_rate"])
+    return " ".join(f"{c} {np.mean(v):.2f}" for c, v in by_cond.items()) or "no trial ended yet"
+
+
+def checkpoint_meta(cfg: Config) -> dict:
+    """Identity of a run, stored in each checkpoint."""
+    return {"learners": [list(x) for x in learner_table(cfg.train)]}
+
+
+def write_checkpoint(run_dir: Path, chunk: int, batch: Batch, cfg: Config) -> Path:
+    """Save the learner states and hyperparameters after `chunk` chunks."""
+    return checkpoint.save(run_dir, chunk, {"states": batch.states, "hypers": batch.hypers}, checkpoint_meta(cfg))
+
+
+def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[Batch, int]:
+    """Newest (or given) checkpoint of a run as a Batch, with its chunk index."""
+    ckpts = checkpoint.list_checkpoints(run_dir)
+    if path is None and not ckpts:
+        raise checkpoint.CheckpointError(f"{Path(run_dir) / checkpoint.CHECKPOINT_DIR}: no checkpoints")
+    path = path or ckpts[-1]
+    fresh = jax.eval_shape(lambda: init_batch(cfg))
+    tree, meta = checkpoint.load(path, {"states": fresh.states, "hypers": fresh.hypers})
+    if meta.get("learners") != checkpoint_meta(cfg)["learners"]:
+        raise checkpoint.CheckpointError(f"{path}: field learners does not match {checkpoint.CONFIG_FILE}")
+    conds = task.stack_conditions([c for c, _ in learner_table(cfg.train)], cfg)
+    return Batch(jax.tree.map(jnp.asarray, tree["states"]), conds, jax.tree.map(jnp.asarray, tree["hypers"])), int(
+        meta["chunk"]
+    )
+
+
+def read_config(run_dir: Path) -> Config:
+    """config.json of a run; raises CheckpointError naming the file and field."""
+    path = Path(run_dir) / checkpoint.CONFIG_FILE
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise checkpoint.CheckpointError(f"{path}: missing") from None
+    except (OSError, json.JSONDecodeError) as exc:
+        raise checkpoint.CheckpointError(f"{path}: unreadable ({exc})") from None
+    if not isinstance(data, dict):
+        raise checkpoint.CheckpointError(f"{path}: expected a JSON object")
+    try:
+        return from_dict(data)
+    except (TypeError, ValueError) as exc:
+        raise checkpoint.CheckpointError(f"{path}: {exc}") from None
+
+
+def truncate_metrics(run_dir: Path, chunk: int) -> None:
+    """Drop metrics lines past `chunk` (and any torn tail), atomically."""
+    path = Path(run_dir) / checkpoint.METRICS_FILE
+    if not path.exists():
+        return
+    keep = []
+    for line in path.read_text().splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            break
+        if row.get("chunk", math.inf) > chunk:
+            break
+        keep.append(line)
+    checkpoint.atomic_write_bytes(path, "".join(x + "\n" for x in keep).encode())
+
+
+def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True, stream=None) -> Batch:
+    """Train cfg.train's learners in chunks, logging and checkpointing into run_dir; returns the final batch.
+
+    Raises NumericsError if a learner goes non-finite; the last good checkpoint stays on disk.
+    """
+    run_dir = Path(run_dir)
+    table = learner_table(cfg.train)
+    if resume:
+        batch, chunk = load_batch(run_dir, cfg)
+        truncate_metrics(run_dir, chunk)
+    else:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        checkpoint.atomic_write_bytes(run_dir / checkpoint.CONFIG_FILE, to_json(cfg).encode())
+        (run_dir / checkpoint.METRICS_FILE).unlink(missing_ok=True)
+        batch, chunk = init_batch(cfg), 0
+        write_checkpoint(run_dir, chunk, batch, cfg)
+    budget = jnp.asarray(cfg.train.trials, jnp.int32)
+    run_chunk = rollout.make_chunk(cfg, cfg.train.chunk_steps)
+    total = cfg.train.trials * len(table)
+    bar = Progress(total, "trials", stream=stream) if progress else None
+    started = time.monotonic()
+    while int(jnp.min(batch.states.trials)) < cfg.train.trials:
+        states = run_chunk(batch.states, batch.conds, batch.hypers, budget)
+        batch = batch._replace(states=states)
+        chunk += 1
+        ok = np.asarray(finite_learners(states))
+        if not ok.all():
+            i = int(np.argmin(ok))
+            cond, seed = table[i]
+            last = checkpoint.list_checkpoints(run_dir)[-1]
+            raise NumericsError(
+                f"learner {i} (condition {cond}, seed {seed}) became non-finite in chunk {chunk}; "
+                f"last good checkpoint kept: {last}"
+            )
+        rows = metrics_rows(states, table, chunk, time.monotonic() - started, cfg)
+        checkpoint.append_lines(run_dir / checkpoint.METRICS_FILE, [json.dumps(r) for r in rows])
+        write_checkpoint(run_dir, chunk, batch, cfg)
+        if bar:
+            bar.update(int(np.minimum(np.asarray(states.trials), cfg.train.trials).sum()), status_line(rows))
+    if bar:
+        bar.update(total, "done", force=True)
+        bar.close()
+    return batch
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def _whole_number(text: str, minimum: int) -> int:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value < minimum or value != int(value) or value >= 2**31:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number in [{minimum}, 2**31)")
+    return int(value)
+
+
+def _positive_int(text: str) -> int:
+    return _whole_number(text, 1)
+
+
+def _seed(text: str) -> int:
+    return _whole_number(text, 0)
+
+
+def _conditions(text: str) -> tuple[str, ...]:
+    names = tuple(n for n in text.replace(",", " ").split() if n)
+    bad = [n for n in names if n not in CONDITIONS]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown condition {bad[0] if bad else text!r}; choose from {','.join(CONDITIONS)}"
+        )
+    if len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(f"condition listed twice in {text!r}")
+    return names
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface of `python -m reach_jax.train`."""
+    p = _Parser(prog="python -m reach_jax.train", description=__doc__.splitlines()[0])
+    p.add_argument("--trials", type=_positive_int, help="trials per learner (2e6 in the paper)")
+    p.add_argument("--seeds", type=_positive_int, help="networks per condition (2 in the paper)")
+    p.add_argument("--conditions", type=_conditions, help=f"comma-separated subset of {','.join(CONDITIONS)}")
+    p.add_argument("--seed", type=_seed, help="master PRNG seed (default 0)")
+    p.add_argument("--chunk-steps", type=_positive_int, help="learner steps per compiled chunk")
+    p.add_argument("--out", type=Path, help="run directory (default runs/<name>)")
+    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a run from its newest checkpoint")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def _overrides(args) -> dict:
+    names = {
+        "trials": "trials",
+        "seeds": "seeds",
+        "conditions": "conditions",
+        "seed": "seed",
+        "chunk_steps": "chunk_steps",
+    }
+    return {field: getattr(args, arg) for arg, field in names.items() if getattr(args, arg) is not None}
+
+
+def default_run_name(train: TrainConfig) -> str:
+    """runs/<name> default: conditions, trials and seeds."""
+    return f"{'-'.join(train.conditions)}_{train.trials}x{train.seeds}_seed{train.seed}"
+
+
+def main(argv=None) -> int:
+    """CLI entry point; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    overrides = _overrides(args)
+    try:
+        if args.resume is not None:
+            if args.out is not None:
+                parser.error("--out cannot be combined with --resume")
+            run_dir = args.resume
+            cfg = read_config(run_dir)
+            for name, value in overrides.items():
+                stored = getattr(cfg.train, name)
+                if value != stored:
+                    raise checkpoint.CheckpointError(
+                        f"{run_dir / checkpoint.CONFIG_FILE}: field train.{name} is {stored!r}, not {value!r}"
+                    )
+            load_batch(run_dir, cfg)
+        else:
+            cfg = dataclasses.replace(Config(), train=dataclasses.replace(TrainConfig(), **overrides))
+            run_dir = args.out if args.out is not None else Path("runs") / default_run_name(cfg.train)
+            if run_dir.exists() and not run_dir.is_dir():
+                parser.error(f"--out {run_dir} is a file, not a directory")
+            if (run_dir / checkpoint.CONFIG_FILE).exists():
+                parser.error(f"--out {run_dir} already holds a run; use --resume {run_dir}")
+    except checkpoint.CheckpointError as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        run(cfg, run_dir, resume=args.resume is not None, progress=not args.quiet)
+    except NumericsError as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return EXIT_NUMERICS
+    except OSError as exc:
+        print(f"{parser.prog}: error: write failed, last good checkpoint kept: {exc}", file=sys.stderr)
+        return EXIT_IO
+    print(f"run written to {run_dir}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
