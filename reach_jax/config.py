@@ -109,6 +109,9 @@ class EvalConfig:
 
     lattice: int = 8  # lattice points per side, section 4.4
     max_time: float = 4.0  # a test trial fails after this long [s], section 4.4
+    figure_seed: int = 0  # seed index of the network per condition drawn in Fig. 4-5 (choice)
+    reference_duration: float = 0.5  # minimum-jerk yardstick movement time [s], human-like (choice)
+    peak_prominence: float = 0.1  # a speed peak must rise this fraction of the top speed above its bases (choice)
 
 
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # Table 2 rows
@@ -123,7 +126,10 @@ class TrainConfig:
     seeds: int = 2  # networks per condition, section 4.4
     conditions: tuple[str, ...] = CONDITIONS  # learning conditions, Table 2 rows
     seed: int = 0  # master PRNG seed
-    chunk_steps: int = 5000  # learner steps per compiled chunk; checkpoint and log between chunks
+    chunk_steps: int = 50_000  # learner steps per compiled chunk; checkpoint and log between chunks
+    lr_grid: tuple[float, ...] = ()  # sweep: learning rates, crossed with the other grids; () = learner.lr
+    noise_grid: tuple[float, ...] = ()  # sweep: exploration bounds; () = learner.noise
+    lam_grid: tuple[float, ...] = ()  # sweep: lambdas of eq. 3; () = learner.lam
 
 
 @dataclass(frozen=True)
@@ -146,9 +152,10 @@ def to_dict(config: Config) -> dict:
     return {"version": CONFIG_VERSION, **dataclasses.asdict(config)}
 
 
-def _tuplify(value):
+def tuplify(value):
+    """Lists (from JSON) to tuples, recursively, to match the frozen config fields."""
     if isinstance(value, list):
-        return tuple(_tuplify(v) for v in value)
+        return tuple(tuplify(v) for v in value)
     return value
 
 
@@ -168,7 +175,7 @@ def from_dict(data: dict) -> Config:
         unknown = set(raw) - names
         if unknown:
             raise ValueError(f"{f.name}.{sorted(unknown)[0]}: unknown field")
-        sections[f.name] = cls(**{k: _tuplify(v) for k, v in raw.items()})
+        sections[f.name] = cls(**{k: tuplify(v) for k, v in raw.items()})
     if data:
         raise ValueError(f"{sorted(data)[0]}: unknown field")
     return Config(**sections)

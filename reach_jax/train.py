@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import math
 import sys
@@ -21,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from reach_jax import checkpoint, rollout, task
-from reach_jax.config import CONDITIONS, Config, TrainConfig, from_dict, to_json
+from reach_jax.config import CONDITIONS, Config, TrainConfig, from_dict, to_dict, to_json, tuplify
 from reach_jax.progress import Progress
 
 EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
@@ -41,9 +42,21 @@ class NumericsError(RuntimeError):
     """A learner's parameters or state stopped being finite."""
 
 
+def hyper_grid(cfg: Config) -> list[tuple[float, float, float]]:
+    """(lr, noise, lam) combinations of a sweep; one combination, the learner defaults, otherwise."""
+    t, lc = cfg.train, cfg.learner
+    return list(itertools.product(t.lr_grid or (lc.lr,), t.noise_grid or (lc.noise,), t.lam_grid or (lc.lam,)))
+
+
+def learner_hypers(cfg: Config) -> list[tuple[float, float, float]]:
+    """(lr, noise, lam) of every learner, aligned with learner_table."""
+    return [h for _ in cfg.train.conditions for h in hyper_grid(cfg) for _ in range(cfg.train.seeds)]
+
+
 def learner_table(train: TrainConfig) -> list[tuple[str, int]]:
-    """(condition, seed index) of every learner, in batch order."""
-    return [(c, s) for c in train.conditions for s in range(train.seeds)]
+    """(condition, seed index) of every learner, in batch order: condition, then sweep point, then seed."""
+    n_grid = max(len(train.lr_grid), 1) * max(len(train.noise_grid), 1) * max(len(train.lam_grid), 1)
+    return [(c, s) for c in train.conditions for _ in range(n_grid) for s in range(train.seeds)]
 
 
 def learner_key(seed: int, index: int) -> jax.Array:
@@ -57,7 +70,8 @@ def init_batch(cfg: Config) -> Batch:
     conds = task.stack_conditions([c for c, _ in table], cfg)
     keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
     states = jax.vmap(lambda k, c: rollout.init_learner(k, c, cfg))(keys, conds)
-    hypers = jax.tree.map(lambda x: jnp.broadcast_to(x, (len(table),)), rollout.default_hyper(cfg))
+    lr, noise, lam = (jnp.asarray(v) for v in zip(*learner_hypers(cfg), strict=True))
+    hypers = rollout.Hyper(lr=lr, noise=noise, lam=lam)
     # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
     return Batch(*jax.tree.map(jnp.copy, (states, conds, hypers)))
 
@@ -89,9 +103,12 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
     trials, steps = np.asarray(states.trials), np.asarray(states.steps)
     distance, n_max = np.asarray(states.distance), np.asarray(states.n_max)
     rows = []
-    for i, (cond, seed) in enumerate(table):
+    for i, ((cond, seed), (lr, noise, lam)) in enumerate(zip(table, learner_hypers(cfg), strict=True)):
         ended = int(s.trials[i])
-        per = (lambda v: float(v[i]) / ended) if ended else (lambda v: None)
+
+        def per(counter, i=i, ended=ended):
+            return float(counter[i]) / ended if ended else None
+
         mean_steps = per(s.trial_steps)
         rows.append(
             {
@@ -99,6 +116,9 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
                 "learner": i,
                 "condition": cond,
                 "seed": seed,
+                "lr": lr,
+                "noise": noise,
+                "lam": lam,
                 "trials": int(trials[i]),
                 "steps": int(steps[i]),
                 "chunk_trials": ended,
@@ -127,7 +147,17 @@ def status_line(rows: list[dict]) -> str:
 
 def checkpoint_meta(cfg: Config) -> dict:
     """Identity of a run, stored in each checkpoint."""
-    return {"learners": [list(x) for x in learner_table(cfg.train)]}
+    return {"config": to_dict(cfg)}
+
+
+def _first_difference(a, b, prefix: str = "") -> str | None:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            diff = _first_difference(a.get(k), b.get(k), f"{prefix}{k}.")
+            if diff:
+                return diff
+        return None
+    return prefix.rstrip(".") if a != b else None
 
 
 def write_checkpoint(run_dir: Path, chunk: int, batch: Batch, cfg: Config) -> Path:
@@ -143,8 +173,10 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[Ba
     path = path or ckpts[-1]
     fresh = jax.eval_shape(lambda: init_batch(cfg))
     tree, meta = checkpoint.load(path, {"states": fresh.states, "hypers": fresh.hypers})
-    if meta.get("learners") != checkpoint_meta(cfg)["learners"]:
-        raise checkpoint.CheckpointError(f"{path}: field learners does not match {checkpoint.CONFIG_FILE}")
+    stored = json.loads(json.dumps(meta.get("config")))
+    diff = _first_difference(stored, json.loads(json.dumps(to_dict(cfg))))
+    if diff:
+        raise checkpoint.CheckpointError(f"{path}: field config.{diff} disagrees with {checkpoint.CONFIG_FILE}")
     conds = task.stack_conditions([c for c, _ in learner_table(cfg.train)], cfg)
     return Batch(jax.tree.map(jnp.asarray, tree["states"]), conds, jax.tree.map(jnp.asarray, tree["hypers"])), int(
         meta["chunk"]
@@ -230,9 +262,13 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
     return batch
 
 
+class UsageError(ValueError):
+    """Bad command-line input; the message is one line."""
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+        raise UsageError(message)
 
 
 def _whole_number(text: str, minimum: int) -> int:
@@ -265,6 +301,40 @@ def _conditions(text: str) -> tuple[str, ...]:
     return names
 
 
+def _grid(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of numbers") from None
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r} must list positive numbers")
+    return values
+
+
+def _setting(text: str) -> tuple[str, str, object]:
+    """Parse SECTION.FIELD=JSON into (section, field, value), checked against the config's fields."""
+    name, sep, raw = text.partition("=")
+    section, dot, fname = name.strip().partition(".")
+    sections = {f.name: f.default_factory for f in dataclasses.fields(Config) if f.name != "train"}
+    if not sep or not dot or section not in sections:
+        raise argparse.ArgumentTypeError(f"{text!r} is not SECTION.FIELD=VALUE with SECTION in {','.join(sections)}")
+    default = {f.name: getattr(sections[section](), f.name) for f in dataclasses.fields(sections[section])}
+    if fname not in default:
+        raise argparse.ArgumentTypeError(f"{section} has no field {fname!r}")
+    try:
+        value = tuplify(json.loads(raw))
+    except json.JSONDecodeError:
+        raise argparse.ArgumentTypeError(f"{raw!r} is not a JSON value") from None
+    want = default[fname]
+    if isinstance(want, float) and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if type(value) is not type(want) or (isinstance(want, tuple) and len(value) != len(want)):
+        raise argparse.ArgumentTypeError(f"{section}.{fname} must look like {json.dumps(want)}")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{section}.{fname} must be finite")
+    return section, fname, value
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The command-line interface of `python -m reach_jax.train`."""
     p = _Parser(prog="python -m reach_jax.train", description=__doc__.splitlines()[0])
@@ -273,6 +343,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--conditions", type=_conditions, help=f"comma-separated subset of {','.join(CONDITIONS)}")
     p.add_argument("--seed", type=_seed, help="master PRNG seed (default 0)")
     p.add_argument("--chunk-steps", type=_positive_int, help="learner steps per compiled chunk")
+    p.add_argument("--lr", type=_grid, help="learning rate, or a comma-separated sweep grid")
+    p.add_argument("--noise", type=_grid, help="exploration bound, or a comma-separated sweep grid")
+    p.add_argument("--lam", type=_grid, help="lambda of eq. 3, or a comma-separated sweep grid")
+    p.add_argument(
+        "--set",
+        type=_setting,
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=JSON",
+        help="override a model constant",
+    )
     p.add_argument("--out", type=Path, help="run directory (default runs/<name>)")
     p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a run from its newest checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -286,8 +367,19 @@ def _overrides(args) -> dict:
         "conditions": "conditions",
         "seed": "seed",
         "chunk_steps": "chunk_steps",
+        "lr": "lr_grid",
+        "noise": "noise_grid",
+        "lam": "lam_grid",
     }
     return {field: getattr(args, arg) for arg, field in names.items() if getattr(args, arg) is not None}
+
+
+def build_config(args) -> Config:
+    """Config from the defaults, the --set overrides and the training flags."""
+    cfg = Config()
+    for section, fname, value in args.set:
+        cfg = dataclasses.replace(cfg, **{section: dataclasses.replace(getattr(cfg, section), **{fname: value})})
+    return dataclasses.replace(cfg, train=dataclasses.replace(TrainConfig(), **_overrides(args)))
 
 
 def default_run_name(train: TrainConfig) -> str:
@@ -295,43 +387,66 @@ def default_run_name(train: TrainConfig) -> str:
     return f"{'-'.join(train.conditions)}_{train.trials}x{train.seeds}_seed{train.seed}"
 
 
+class Invocation(NamedTuple):
+    """A validated command line."""
+
+    cfg: Config  # the run's config (the stored one when resuming)
+    run_dir: Path  # where the run lives
+    resume: bool  # continue from the newest checkpoint
+    quiet: bool  # no progress bar
+
+
+def _first_existing(path: Path) -> Path:
+    for candidate in (path, *path.parents):
+        if candidate.exists():
+            return candidate
+    return Path(".")
+
+
+def parse(argv=None) -> Invocation:
+    """Validate a command line without writing anything; raises UsageError or CheckpointError."""
+    args = build_parser().parse_args(argv)
+    overrides = _overrides(args)
+    if args.resume is not None:
+        if args.out is not None:
+            raise UsageError("--out cannot be combined with --resume")
+        cfg = read_config(args.resume)
+        asked = [("train", name, value) for name, value in overrides.items()] + list(args.set)
+        for section, name, value in asked:
+            stored = getattr(getattr(cfg, section), name)
+            if value != stored:
+                raise checkpoint.CheckpointError(
+                    f"{args.resume / checkpoint.CONFIG_FILE}: field {section}.{name} is {stored!r}, not {value!r}"
+                )
+        load_batch(args.resume, cfg)
+        return Invocation(cfg, args.resume, True, args.quiet)
+    cfg = build_config(args)
+    run_dir = args.out if args.out is not None else Path("runs") / default_run_name(cfg.train)
+    existing = _first_existing(run_dir)
+    if not existing.is_dir():
+        raise UsageError(f"--out {run_dir}: {existing} is a file, not a directory")
+    if (run_dir / checkpoint.CONFIG_FILE).exists():
+        raise UsageError(f"--out {run_dir} already holds a run; use --resume {run_dir}")
+    return Invocation(cfg, run_dir, False, args.quiet)
+
+
 def main(argv=None) -> int:
     """CLI entry point; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    overrides = _overrides(args)
+    prog = build_parser().prog
     try:
-        if args.resume is not None:
-            if args.out is not None:
-                parser.error("--out cannot be combined with --resume")
-            run_dir = args.resume
-            cfg = read_config(run_dir)
-            for name, value in overrides.items():
-                stored = getattr(cfg.train, name)
-                if value != stored:
-                    raise checkpoint.CheckpointError(
-                        f"{run_dir / checkpoint.CONFIG_FILE}: field train.{name} is {stored!r}, not {value!r}"
-                    )
-            load_batch(run_dir, cfg)
-        else:
-            cfg = dataclasses.replace(Config(), train=dataclasses.replace(TrainConfig(), **overrides))
-            run_dir = args.out if args.out is not None else Path("runs") / default_run_name(cfg.train)
-            if run_dir.exists() and not run_dir.is_dir():
-                parser.error(f"--out {run_dir} is a file, not a directory")
-            if (run_dir / checkpoint.CONFIG_FILE).exists():
-                parser.error(f"--out {run_dir} already holds a run; use --resume {run_dir}")
-    except checkpoint.CheckpointError as exc:
-        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        inv = parse(argv)
+    except (UsageError, checkpoint.CheckpointError) as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     try:
-        run(cfg, run_dir, resume=args.resume is not None, progress=not args.quiet)
+        run(inv.cfg, inv.run_dir, resume=inv.resume, progress=not inv.quiet)
     except NumericsError as exc:
-        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_NUMERICS
     except OSError as exc:
-        print(f"{parser.prog}: error: write failed, last good checkpoint kept: {exc}", file=sys.stderr)
+        print(f"{prog}: error: write failed, last good checkpoint kept: {exc}", file=sys.stderr)
         return EXIT_IO
-    print(f"run written to {run_dir}", file=sys.stderr)
+    print(f"run written to {inv.run_dir}", file=sys.stderr)
     return 0
 
 

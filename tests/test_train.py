@@ -1,0 +1,200 @@
+"""The learner step, the chunked trainer and the training command line."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import chex
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from reach_jax import arm, checkpoint, encoding, learner, network, rollout, sensor, task, train
+from reach_jax.config import CONDITIONS, Config, LearnerConfig, TaskConfig, TrainConfig, n_inputs, n_past_inputs
+
+CFG = Config()
+
+
+def tiny(**train_fields) -> Config:
+    """Paper model with a short training schedule."""
+    fields = {"trials": 20, "seeds": 1, "chunk_steps": 200, **train_fields}
+    return dataclasses.replace(CFG, train=dataclasses.replace(TrainConfig(), **fields))
+
+
+def test_ts_targets_follow_eq_1_and_2():
+    lc = LearnerConfig()
+    pending = learner.Pending(
+        x=jnp.zeros(3),
+        out=jnp.array([0.1, 0.2, -0.3]),
+        rnd=jnp.array([0.05, -0.1]),
+        valid=jnp.array(True),
+        terminal=jnp.array(False),
+        reward=jnp.array(0.0),
+    )
+    p_now, n_max = 0.25, 40.0
+    got = learner.ts_targets(pending, jnp.array(p_now), jnp.array(n_max), lc)
+    np.testing.assert_allclose(got[0], p_now - lc.p_range / n_max, rtol=1e-6)
+    np.testing.assert_allclose(got[1:], [0.2 + 0.05 * (p_now - 0.1), -0.3 - 0.1 * (p_now - 0.1)], rtol=1e-6)
+
+
+def test_terminal_reward_stands_in_for_p_and_floor_guards_only_non_terminal():
+    lc = LearnerConfig()
+    base = learner.Pending(
+        x=jnp.zeros(3),
+        out=jnp.array([-0.45, 0.0, 0.0]),
+        rnd=jnp.array([0.1, 0.1]),
+        valid=jnp.array(True),
+        terminal=jnp.array(True),
+        reward=jnp.array(lc.reward_out),
+    )
+    n_max = jnp.array(50.0)
+    out_target = learner.ts_targets(base, jnp.array(0.3), n_max, lc)
+    np.testing.assert_allclose(out_target[0], lc.reward_out - lc.p_range / 50.0, rtol=1e-6)
+    # The out penalty pulls the actor away from the noise that led there: r - p(t-1) < 0 here.
+    np.testing.assert_allclose(out_target[1:], 0.1 * (lc.reward_out + 0.45), rtol=1e-6)
+    running = base._replace(terminal=jnp.array(False))
+    low = learner.ts_targets(running, jnp.array(-0.49), n_max, lc)
+    assert float(low[0]) == pytest.approx(lc.critic_floor)
+
+
+def test_n_max_follows_eq_3():
+    lam = jnp.array(0.9)
+    assert float(learner.update_n_max(jnp.array(100.0), jnp.array(95), lam)) == 95.0
+    assert float(learner.update_n_max(jnp.array(100.0), jnp.array(80), lam)) == pytest.approx(90.0)
+
+
+def test_curriculum_staircase_moves_and_stays_in_bounds():
+    lo, hi = task.curriculum_bounds(CFG)
+    step = CFG.task.curriculum_step
+    d = jnp.array(0.1)
+    assert float(task.update_curriculum(d, jnp.array(True), CFG)) == pytest.approx(0.1 + step)
+    assert float(task.update_curriculum(d, jnp.array(False), CFG)) == pytest.approx(0.1 - step)
+    assert float(task.update_curriculum(jnp.array(lo), jnp.array(False), CFG)) == pytest.approx(lo)
+    assert float(task.update_curriculum(jnp.array(hi), jnp.array(True), CFG)) == pytest.approx(hi)
+
+
+def test_new_trials_start_in_field_at_rest_with_untouched_target_in_the_box():
+    lo, hi = (np.asarray(b) for b in sensor.field_bounds(CFG.sensor))
+    keys = jax.random.split(jax.random.PRNGKey(3), 256)
+    distance = jnp.array(0.08)
+    draws = jax.vmap(lambda k: task.draw_trial(k, CFG))(keys)
+    start, target, force = jax.vmap(lambda d: task.place_trial(d, distance, jnp.array(8.0), CFG))(draws)
+    hand = jax.vmap(lambda s: arm.hand_position(s[:2], CFG.arm))(start)
+    assert np.all(np.asarray(start[:, 2:]) == 0)
+    assert np.all((hand >= lo - 1e-6) & (hand <= hi + 1e-6))
+    assert np.all((target >= lo - 1e-6) & (target <= hi + 1e-6))
+    assert np.all(np.abs(target - hand).max(axis=1) <= float(distance) + 1e-6)
+    assert np.mean(np.asarray(task.touching(hand, target, CFG))) < 0.05
+    assert np.all(np.abs(force) <= 8.0) and np.std(force) > 1.0
+
+
+def test_conditions_are_data():
+    conds = task.stack_conditions(CONDITIONS, CFG)
+    chex.assert_tree_shape_prefix(conds, (4,))
+    field_norms = np.abs(np.asarray(conds.field)).sum(axis=(1, 2))
+    assert list(field_norms > 0) == [False, True, False, False]
+    assert list(np.asarray(conds.force_amplitude) > 0) == [False, False, True, True]
+    past = np.asarray(conds.input_mask)[:, n_inputs(CFG) - n_past_inputs(CFG) :]
+    assert list(past.sum(axis=1)) == [60, 60, 60, 0]
+    with pytest.raises(ValueError, match="unknown condition"):
+        task.make_condition("sideways", CFG)
+
+
+def test_trials_end_and_reset_inside_the_scan():
+    # A 0.2 s cap forces trial ends within the trace, whatever the network does.
+    cfg = dataclasses.replace(CFG, task=dataclasses.replace(TaskConfig(), max_trial_time=0.2))
+    trace = rollout.make_trace(cfg, 60)
+    n_now, n_past = n_inputs(cfg) - n_past_inputs(cfg), n_past_inputs(cfg)
+    joints = n_past - 2 * cfg.encoding.tau_units
+    for name in ("none", "random_nopast"):
+        cond = task.make_condition(name, cfg)
+        final, info = trace(rollout.init_learner(jax.random.PRNGKey(0), cond, cfg), cond, rollout.default_hyper(cfg))
+        done = np.asarray(info.goal | info.out_of_range | info.cap)
+        assert done.sum() >= 5
+        assert int(final.trials) == done.sum() == int(final.stats.trials)
+        assert int(final.stats.goals + final.stats.outs + final.stats.caps) == done.sum()
+        x = np.asarray(info.x)
+        first = np.flatnonzero(done[:-1]) + 1
+        if name == "random_nopast":
+            assert np.all(x[:, n_now:] == 0)
+            continue
+        # A fresh trial starts at rest, with "one step before" equal to now and zero past torque.
+        np.testing.assert_array_equal(x[first, n_now : n_now + joints], x[first, n_now - joints : n_now])
+        zero_tau = np.asarray(encoding.localize(jnp.array(0.0), -1.0, 1.0, cfg.encoding.tau_units))
+        np.testing.assert_allclose(x[first, n_now + joints :], np.tile(zero_tau, (len(first), 2)), atol=1e-6)
+        assert np.any(x[first - 1, n_now + joints :] != x[first, n_now + joints :])
+
+
+def test_frozen_after_budget():
+    cfg = tiny(trials=1)
+    batch = train.init_batch(cfg)
+    chunk = rollout.make_chunk(cfg, 400)
+    states = chunk(batch.states, batch.conds, batch.hypers, jnp.array(1))
+    assert int(states.trials[0]) == 1
+    again = chunk(jax.tree.map(jnp.copy, states), batch.conds, batch.hypers, jnp.array(1))
+    chex.assert_trees_all_equal(again.params, states.params)
+    assert int(again.steps[0]) == int(states.steps[0])
+
+
+def test_batched_chunk_matches_pure_single_learner_train():
+    cfg = tiny(conditions=("none", "viscous", "random", "random_nopast"), seeds=2)
+    n_steps = 60
+    batch = train.init_batch(cfg)
+    chunked = rollout.make_chunk(cfg, n_steps)(batch.states, batch.conds, batch.hypers, jnp.array(10**6))
+    keys = jnp.stack([train.learner_key(cfg.train.seed, s) for _, s in train.learner_table(cfg.train)])
+    pure = jax.jit(jax.vmap(train.make_train(cfg, n_steps)))(keys, batch.conds, batch.hypers)
+    # Same learner, same draws: batching may only reorder float32 sums.
+    chex.assert_trees_all_close(pure.params, chunked.params, rtol=1e-4, atol=1e-6)
+    np.testing.assert_array_equal(np.asarray(pure.trials), np.asarray(chunked.trials))
+    # Seed s starts from the same weights in every condition; conditions then drive them apart.
+    first = jax.tree.leaves(jax.vmap(lambda k: network.init_params(k, cfg))(keys[::2]))[0]
+    np.testing.assert_array_equal(first[0], first[1])
+    moved = [float(jnp.abs(a[0] - a[2]).max()) for a in jax.tree.leaves(chunked.params)]
+    assert max(moved) > 0
+
+
+def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
+    a_file = tmp_path / "file"
+    a_file.write_text("x")
+    cases = [
+        ["--trials", "0"],
+        ["--trials", "-3"],
+        ["--trials", "nan"],
+        ["--trials", "ten"],
+        ["--trials", "2.5"],
+        ["--seeds", "0"],
+        ["--conditions", "none,sideways"],
+        ["--out", str(a_file)],
+        ["--out", str(a_file / "sub")],
+        ["--resume", str(tmp_path / "missing")],
+    ]
+    for argv in cases:
+        out_dir = ["--out", str(tmp_path / "run")] if "--out" not in argv and "--resume" not in argv else []
+        status = train.main([*argv, *out_dir, "--quiet"])
+        err = capsys.readouterr().err
+        assert status == train.EXIT_USAGE, argv
+        assert err.count("\n") == 1 and err.startswith("python -m reach_jax.train: error:"), (argv, err)
+        assert "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
+    out = tmp_path / "run"
+    argv = ["--trials", "2e1", "--seeds", "1", "--conditions", "none,random_nopast", "--chunk-steps", "300"]
+    assert train.main([*argv, "--out", str(out), "--quiet"]) == 0
+    cfg = train.read_config(out)
+    assert cfg.train.trials == 20 and cfg.train.conditions == ("none", "random_nopast")
+    assert cfg == tiny(conditions=("none", "random_nopast"), chunk_steps=300)
+    rows = [json.loads(x) for x in (out / checkpoint.METRICS_FILE).read_text().splitlines()]
+    chunks = max(r["chunk"] for r in rows)
+    assert len(rows) == 2 * chunks
+    need = {"trials", "steps", "success_rate", "mean_trial_steps", "distance_m", "n_max", "condition", "seed"}
+    assert all(need <= set(r) for r in rows)
+    assert all(r["trials"] >= 20 for r in rows if r["chunk"] == chunks)
+    batch, chunk = train.load_batch(out, cfg)
+    assert chunk == chunks
+    np.testing.assert_array_equal(np.asarray(batch.states.trials), [r["trials"] for r in rows if r["chunk"] == chunks])
+    assert train.main([*argv, "--out", str(out), "--quiet"]) == train.EXIT_USAGE
+    assert "--resume" in capsys.readouterr().err
