@@ -1,0 +1,762 @@
+"""Plain-NumPy (float64) oracle of the whole model, used only by tests and benchmarks.
+
+It follows the paper's equations line by line and is written independently of the JAX code: no jax import,
+explicit loops, np.linalg.solve for eq. 4-5, a hand-written backprop. It can replay a JAX run from the noise
+and uniform draws recorded by `reach_jax.rollout.make_trace`, or run on its own numpy RNG (`run_reference`).
+
+Units: joint angles [rad], joint velocities [rad/s], torques [N m], hand positions [m] in the shoulder frame
+(x right, y forward), hand velocities [m/s], hand forces [N], viscous fields [N s/m], time [s]; network signals
+are dimensionless; N_max and trial lengths are counted in steps of cfg.arm.dt.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import NamedTuple
+
+import numpy as np
+
+from reach_jax.config import CONDITIONS, ArmConfig, Config, LearnerConfig, SensorConfig
+
+# ---------------------------------------------------------------------------------------------------------------
+# Arm (eq. 4-5, SPEC §1)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def _links(cfg: ArmConfig):
+    """(M2, l1, l2, s2, I1, I2) of Table 1 from the config."""
+    m1, m2 = cfg.mass
+    l1, l2 = cfg.length
+    s2 = cfg.com_fraction * l2
+    i1 = cfg.inertia_factor * m1 * l1 * l1
+    i2 = cfg.inertia_factor * m2 * l2 * l2
+    return m2, l1, l2, s2, i1, i2
+
+
+def hand_position(theta, cfg: ArmConfig) -> np.ndarray:
+    """Forward kinematics.
+
+    Args: theta (2,) joint angles [rad].
+    Returns: (2,) hand position [m].
+    """
+    _, l1, l2, _, _, _ = _links(cfg)
+    elbow = np.array([l1 * math.cos(theta[0]), l1 * math.sin(theta[0])])
+    phi = theta[0] + theta[1]
+    return elbow + np.array([l2 * math.cos(phi), l2 * math.sin(phi)])
+
+
+def jacobian(theta, cfg: ArmConfig) -> np.ndarray:
+    """d(hand)/d(theta).
+
+    Args: theta (2,) joint angles [rad].
+    Returns: (2, 2) [m/rad], column j = d/d theta_j.
+    """
+    _, l1, l2, _, _, _ = _links(cfg)
+    phi = theta[0] + theta[1]
+    # Column 2: link 2 turning about the elbow; column 1: the whole arm turning about the shoulder.
+    col2 = np.array([-l2 * math.sin(phi), l2 * math.cos(phi)])
+    col1 = np.array([-l1 * math.sin(theta[0]), l1 * math.cos(theta[0])]) + col2
+    return np.column_stack([col1, col2])
+
+
+def hand_velocity(state, cfg: ArmConfig) -> np.ndarray:
+    """Hand velocity J(theta) omega.
+
+    Args: state (4,) [rad, rad, rad/s, rad/s].
+    Returns: (2,) [m/s].
+    """
+    return jacobian(state[:2], cfg) @ np.asarray(state[2:], dtype=np.float64)
+
+
+def inverse_kinematics(hand, cfg: ArmConfig) -> np.ndarray:
+    """Joint angles with theta2 in (0, pi).
+
+    Args: hand (2,) position [m].
+    Returns: (2,) joint angles [rad].
+    """
+    _, l1, l2, _, _, _ = _links(cfg)
+    r = math.hypot(hand[0], hand[1])
+    # Law of cosines for the elbow's interior angle, then theta2 is its supplement.
+    interior = math.acos(min(1.0, max(-1.0, (l1 * l1 + l2 * l2 - r * r) / (2 * l1 * l2))))
+    theta2 = math.pi - interior
+    # Angle at the shoulder between link 1 and the shoulder-hand line; theta2 > 0 puts the hand CCW of link 1.
+    beta = math.acos(min(1.0, max(-1.0, (r * r + l1 * l1 - l2 * l2) / (2 * l1 * r))))
+    theta1 = math.atan2(hand[1], hand[0]) - beta
+    return np.array([theta1, theta2])
+
+
+def inertia_matrix(theta, cfg: ArmConfig) -> np.ndarray:
+    """Coefficients of the accelerations in eq. 4-5.
+
+    Args: theta (2,) [rad].
+    Returns: (2, 2) [kg m^2].
+    """
+    m2, l1, _, s2, i1, i2 = _links(cfg)
+    c2 = math.cos(theta[1])
+    a11 = i1 + i2 + 2 * m2 * l1 * s2 * c2 + m2 * l1**2  # eq. 4, coefficient of theta1''
+    a12 = i2 + m2 * l1 * s2 * c2  # eq. 4, coefficient of theta2''
+    a21 = i2 + m2 * l1 * s2 * c2  # eq. 5, coefficient of theta1''
+    a22 = i2  # eq. 5, coefficient of theta2''
+    return np.array([[a11, a12], [a21, a22]])
+
+
+def hand_force(state, field, force, cfg: ArmConfig) -> np.ndarray:
+    """External hand force F = B xdot + F_const.
+
+    Args: state (4,), field (2, 2) [N s/m], force (2,) [N].
+    Returns: (2,) [N].
+    """
+    return np.asarray(field, dtype=np.float64) @ hand_velocity(state, cfg) + np.asarray(force, dtype=np.float64)
+
+
+def dsdt(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
+    """Eq. 4-5 solved for the accelerations.
+
+    Args: state (4,), tau (2,) [N m], field (2, 2) [N s/m], force (2,) [N].
+    Returns: (4,) [rad/s, rad/s^2].
+    """
+    m2, l1, _, s2, _, _ = _links(cfg)
+    b1, b2 = cfg.joint_viscosity
+    th2 = state[1]
+    w1, w2 = state[2], state[3]
+    # Velocity terms of eq. 4 and eq. 5, written as printed.
+    v1 = -m2 * l1 * s2 * (2 * w1 + w2) * w2 * math.sin(th2) + b1 * w1
+    v2 = m2 * l1 * s2 * w1**2 * math.sin(th2) + b2 * w2
+    # The hand force acts on the joints through the transposed Jacobian (virtual work).
+    ext = jacobian(state[:2], cfg).T @ hand_force(state, field, force, cfg)
+    rhs = np.array([tau[0] + ext[0] - v1, tau[1] + ext[1] - v2])
+    acc = np.linalg.solve(inertia_matrix(state[:2], cfg), rhs)
+    return np.array([w1, w2, acc[0], acc[1]])
+
+
+def rk4(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
+    """Classical RK4 over cfg.dt, torque held, force re-evaluated per stage.
+
+    Args: as `dsdt`.
+    Returns: (4,) state.
+    """
+    h = cfg.dt
+    s = np.asarray(state, dtype=np.float64)
+    k1 = dsdt(s, tau, field, force, cfg)
+    k2 = dsdt(s + (h / 2) * k1, tau, field, force, cfg)
+    k3 = dsdt(s + (h / 2) * k2, tau, field, force, cfg)
+    k4 = dsdt(s + h * k3, tau, field, force, cfg)
+    return s + (h / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def elbow_stop(state, cfg: ArmConfig) -> np.ndarray:
+    """Hard stop at theta2 = cfg.theta2_stop (SPEC §1 choice).
+
+    Args: state (4,).
+    Returns: (4,) state.
+    """
+    s = np.array(state, dtype=np.float64)
+    if s[1] >= cfg.theta2_stop:
+        s[1] = cfg.theta2_stop
+        if s[3] > 0.0:
+            s[3] = 0.0
+    return s
+
+
+def arm_step(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
+    """RK4 step then elbow stop.
+
+    Args: state (4,), tau (2,) [N m], field (2, 2) [N s/m], force (2,) [N].
+    Returns: (4,).
+    """
+    return elbow_stop(rk4(state, tau, field, force, cfg), cfg)
+
+
+def is_out(state, cfg: ArmConfig) -> bool:
+    """Joint-limit test of section 4.2.
+
+    Args: state (4,) [rad, rad/s].
+    Returns: True when a limit is crossed.
+    """
+    lo, hi = cfg.theta1_range
+    return bool(state[0] < lo or state[0] > hi or state[1] < cfg.theta2_min)
+
+
+def kinetic_energy(state, cfg: ArmConfig) -> float:
+    """0.5 omega^T A(theta) omega.
+
+    Args: state (4,) [rad, rad/s].
+    Returns: () [J].
+    """
+    w = np.asarray(state[2:], dtype=np.float64)
+    return float(0.5 * w @ inertia_matrix(state[:2], cfg) @ w)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Visual sensor (section 4.2, SPEC §2)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def field_bounds(cfg: SensorConfig):
+    """Visual field corners.
+
+    Args: cfg sensor geometry.
+    Returns: ((x_min, y_min), (x_max, y_max)) [m].
+    """
+    side = cfg.n_cells * cfg.cell_size
+    x0 = cfg.centre[0] - side / 2
+    y0 = cfg.centre[1] - side / 2
+    return (x0, y0), (x0 + side, y0 + side)
+
+
+def _union_area(rects) -> float:
+    """Area covered by axis-aligned rectangles [(x0, y0, x1, y1), ...] by a sweep over x slabs."""
+    rects = [r for r in rects if r[2] > r[0] and r[3] > r[1]]
+    xs = sorted({r[0] for r in rects} | {r[2] for r in rects})
+    area = 0.0
+    for xa, xb in zip(xs[:-1], xs[1:], strict=True):
+        spans = sorted((r[1], r[3]) for r in rects if r[0] <= xa and r[2] >= xb)
+        covered, top = 0.0, -math.inf
+        for lo, hi in spans:
+            lo = max(lo, top)
+            if hi > lo:
+                covered += hi - lo
+                top = hi
+        area += (xb - xa) * covered
+    return area
+
+
+def render(hand, target, cfg: SensorConfig) -> np.ndarray:
+    """Cell coverage by the union of the hand and target squares.
+
+    Args: hand (2,), target (2,) centres [m].
+    Returns: (n*n,) in [0, 1], row-major from lowest y.
+    """
+    (x0, y0), _ = field_bounds(cfg)
+    c = cfg.cell_size
+    squares = [(p[0] - c / 2, p[1] - c / 2, p[0] + c / 2, p[1] + c / 2) for p in (hand, target)]
+    out = np.zeros(cfg.n_cells * cfg.n_cells)
+    for row in range(cfg.n_cells):
+        for col in range(cfg.n_cells):
+            cx0, cy0 = x0 + col * c, y0 + row * c
+            cx1, cy1 = cx0 + c, cy0 + c
+            clipped = [(max(a, cx0), max(b, cy0), min(d, cx1), min(e, cy1)) for a, b, d, e in squares]
+            out[row * cfg.n_cells + col] = _union_area(clipped) / (c * c)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Encoding (section 4.2, Fig. 3, SPEC §3)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def localize(x: float, lo: float, hi: float, n: int) -> np.ndarray:
+    """Triangular code by linear interpolation between the two bracketing units.
+
+    Args: x () value, [lo, hi] range, n units.
+    Returns: (n,).
+    """
+    spacing = (hi - lo) / (n - 1)
+    units = np.zeros(n)
+    if x <= lo:
+        units[0] = 1.0
+        return units
+    if x >= hi:
+        units[n - 1] = 1.0
+        return units
+    pos = (x - lo) / spacing
+    k = min(int(math.floor(pos)), n - 2)
+    frac = pos - k
+    units[k] += 1.0 - frac
+    units[k + 1] += frac
+    return units
+
+
+def encode_joints(theta, omega, cfg: Config) -> np.ndarray:
+    """Coded joint state.
+
+    Args: theta (2,) [rad], omega (2,) [rad/s].
+    Returns: (40,) for the paper's sizes.
+    """
+    e = cfg.encoding
+    parts = []
+    for j in range(2):
+        parts.append(localize(float(theta[j]), e.theta_ranges[j][0], e.theta_ranges[j][1], e.theta_units[j]))
+    for j in range(2):
+        parts.append(localize(float(omega[j]), -e.omega_range, e.omega_range, e.omega_units))
+    return np.concatenate(parts)
+
+
+def encode(visual, state, prev_state, prev_tau, cfg: Config) -> np.ndarray:
+    """125 network inputs.
+
+    Args: visual (25,), state (4,) and prev_state (4,) [rad, rad/s], prev_tau (2,) [N m].
+    Returns: (125,).
+    """
+    parts = [np.asarray(visual, dtype=np.float64)]
+    parts.append(encode_joints(state[:2], state[2:], cfg))
+    parts.append(encode_joints(prev_state[:2], prev_state[2:], cfg))
+    for j in range(2):
+        tmax = cfg.arm.tau_max[j]
+        parts.append(localize(float(prev_tau[j]), -tmax, tmax, cfg.encoding.tau_units))
+    return np.concatenate(parts)
+
+
+def input_mask(use_past: bool, cfg: Config) -> np.ndarray:
+    """0/1 input mask; use_past=False withholds the one-step-before signals.
+
+    Args: use_past ().
+    Returns: (125,).
+    """
+    e = cfg.encoding
+    n_now = cfg.sensor.n_cells**2 + sum(e.theta_units) + 2 * e.omega_units
+    n_past = sum(e.theta_units) + 2 * e.omega_units + 2 * e.tau_units
+    return np.array([1.0] * n_now + [1.0 if use_past else 0.0] * n_past)
+
+
+def observe(state, prev_state, prev_tau, target, mask, cfg: Config) -> np.ndarray:
+    """Masked input.
+
+    Args: state, prev_state (4,), prev_tau (2,) [N m], target (2,) [m], mask (125,).
+    Returns: (125,).
+    """
+    visual = render(hand_position(state[:2], cfg.arm), target, cfg.sensor)
+    return encode(visual, state, prev_state, prev_tau, cfg) * np.asarray(mask, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Network (section 4.2, SPEC §4)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def f(u):
+    """Neuron output f(u) = 1 / (1 + exp(-u)) - 0.5.
+
+    Args: u (...) net input.
+    Returns: (...) in (-0.5, 0.5).
+    """
+    return 1.0 / (1.0 + np.exp(-u)) - 0.5
+
+
+def layers_from_flax(params) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Explicit (W, b) per layer, float64.
+
+    Args: params flax dict {'params': {'Dense_i': {kernel (n_in, n_out), bias (n_out,)}}}.
+    """
+    p = params["params"]
+    out = []
+    for i in range(len(p)):
+        d = p[f"Dense_{i}"]
+        w = np.array(d["kernel"], dtype=np.float64)
+        b = np.array(d["bias"], dtype=np.float64) if "bias" in d else np.zeros(w.shape[1])
+        out.append((w, b))
+    return out
+
+
+def layers_to_flax(layers, use_bias: bool = True) -> dict:
+    """Inverse of `layers_from_flax`.
+
+    Args: layers [(W (n_in, n_out), b (n_out,))].
+    Returns: a flax-shaped dict of numpy arrays.
+    """
+    tree = {}
+    for i, (w, b) in enumerate(layers):
+        tree[f"Dense_{i}"] = {"kernel": w.copy(), "bias": b.copy()} if use_bias else {"kernel": w.copy()}
+    return {"params": tree}
+
+
+def forward(layers, x) -> list[np.ndarray]:
+    """Forward pass.
+
+    Args: layers [(W, b)], x (125,) input.
+    Returns: the activations [x, h1 (30,), h2 (10,), out (3,)].
+    """
+    acts = [np.asarray(x, dtype=np.float64)]
+    for w, b in layers:
+        a = acts[-1]
+        u = np.zeros(w.shape[1])
+        for j in range(w.shape[1]):
+            u[j] = b[j] + np.dot(a, w[:, j])
+        acts.append(f(u))
+    return acts
+
+
+def sgd_step(layers, x, target, lr: float, use_bias: bool = True):
+    """One SGD step on 0.5 * sum((target - out)^2), backprop by hand.
+
+    Args: x (125,), target (3,), lr ().
+    Returns: (new layers, loss ()).
+    """
+    acts = forward(layers, x)
+    err = np.asarray(target, dtype=np.float64) - acts[-1]
+    loss = 0.5 * float(np.sum(err**2))
+    # dL/du at the output: -(target - out) * f'(u), with f'(u) = (0.5 + f)(0.5 - f).
+    delta = -err * (0.5 + acts[-1]) * (0.5 - acts[-1])
+    new = [None] * len(layers)
+    for i in range(len(layers) - 1, -1, -1):
+        w, b = layers[i]
+        below = acts[i]
+        grad_w = np.outer(below, delta)
+        grad_b = delta if use_bias else np.zeros_like(b)
+        # Propagate through the old weights before they change.
+        delta_below = (w @ delta) * (0.5 + below) * (0.5 - below)
+        new[i] = (w - lr * grad_w, b - lr * grad_b)
+        delta = delta_below
+    return new, loss
+
+
+def init_layers(rng: np.random.Generator, cfg: Config):
+    """Fresh weights: hidden U(+-hidden_init), output U(+-output_init), zero biases.
+
+    Args: rng numpy Generator.
+    Returns: [(W, b)].
+    """
+    n = cfg.network
+    sizes = [cfg.sensor.n_cells**2 + 2 * (sum(cfg.encoding.theta_units) + 2 * cfg.encoding.omega_units)]
+    sizes[0] += 2 * cfg.encoding.tau_units
+    sizes += list(n.hidden) + [n.n_out]
+    layers = []
+    for i in range(len(sizes) - 1):
+        a = n.output_init if i == len(sizes) - 2 else n.hidden_init
+        layers.append((rng.uniform(-a, a, (sizes[i], sizes[i + 1])), np.zeros(sizes[i + 1])))
+    return layers
+
+
+def torque(m, rnd, cfg: Config) -> np.ndarray:
+    """tau_i = 2 tau_max_i (m_i + rnd_i) clipped to +-tau_max_i.
+
+    Args: m (2,) actor, rnd (2,) noise.
+    Returns: (2,) [N m].
+    """
+    out = np.zeros(2)
+    for j in range(2):
+        tmax = cfg.arm.tau_max[j]
+        out[j] = min(tmax, max(-tmax, 2.0 * tmax * (m[j] + rnd[j])))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# TS learning (eq. 1-3, SPEC §5)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Pending:
+    """The previous step awaiting its TS update."""
+
+    x: np.ndarray  # (125,) masked input x(t-1)
+    out: np.ndarray  # (3,) [p, m1, m2] at t-1
+    rnd: np.ndarray  # (2,) noise added at t-1
+    valid: bool  # False: no update (first step of a run, or after a capped trial)
+    terminal: bool  # the transition ended its trial at the goal or a joint limit
+    reward: float  # reinforcement that ended the trial, 0 otherwise
+
+
+def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig) -> np.ndarray:
+    """Eq. 1 (critic, floored unless terminal) and eq. 2 (actor).
+
+    Args: p_now () p(t), n_max () [steps].
+    Returns: (3,) targets.
+    """
+    p_next = pending.reward if pending.terminal else p_now  # reinforcement stands in for p(t) at a trial's end
+    critic = p_next - cfg.p_range / n_max  # eq. 1
+    if not pending.terminal:
+        critic = max(critic, cfg.critic_floor)
+    p_prev = pending.out[0]
+    actor = [pending.out[1 + j] + pending.rnd[j] * (p_next - p_prev) for j in range(2)]  # eq. 2
+    return np.array([critic, actor[0], actor[1]])
+
+
+def update_n_max(n_max: float, n_steps: int, lam: float) -> float:
+    """Eq. 3.
+
+    Args: n_max () previous N_max [steps], n_steps () steps of the successful trial, lam ().
+    Returns: () [steps].
+    """
+    if n_steps > lam * n_max:
+        return float(n_steps)
+    return lam * n_max
+
+
+def ts_update(layers, x_now, pending: Pending, n_max: float, lr: float, cfg: Config):
+    """Outputs at x(t) with W(t), then one TS step on x(t-1).
+
+    Args: x_now (125,), n_max () [steps], lr ().
+    Returns: (layers, out (3,), loss ()).
+    """
+    out_now = forward(layers, x_now)[-1]
+    if not pending.valid:
+        return layers, out_now, 0.0
+    target = ts_targets(pending, out_now[0], n_max, cfg.learner)
+    new, loss = sgd_step(layers, pending.x, target, lr, cfg.network.use_bias)
+    return new, out_now, loss
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Task: conditions, placement, goal, drift, curriculum (SPEC §2, §5, §6)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+class Condition(NamedTuple):
+    """One learner's environment."""
+
+    field: np.ndarray  # (2, 2) viscous field [N s/m]
+    force_amplitude: float  # random force bound per axis [N]
+    input_mask: np.ndarray  # (125,) 0/1
+
+
+def make_condition(name: str, cfg: Config) -> Condition:
+    """Condition for a Table-2 name.
+
+    Args: name one of CONDITIONS.
+    Returns: a Condition.
+    """
+    if name not in CONDITIONS:
+        raise ValueError(f"unknown condition {name!r}")
+    field = np.array(cfg.force.viscous, dtype=np.float64) if name == "viscous" else np.zeros((2, 2))
+    amplitude = cfg.force.random_amplitude if name in ("random", "random_nopast") else 0.0
+    return Condition(field, amplitude, input_mask(name != "random_nopast", cfg))
+
+
+class Draws(NamedTuple):
+    """Uniform [0, 1) numbers fixing one trial."""
+
+    start: np.ndarray  # (2,)
+    target: np.ndarray  # (K, 2) candidates
+    force: np.ndarray  # (2,)
+
+
+def touching(hand, target, cfg: Config) -> bool:
+    """Hand centre inside the goal square (side 2 goal_half_width).
+
+    Args: hand (2,), target (2,) [m].
+    Returns: bool.
+    """
+    half = cfg.task.goal_half_width_cells * cfg.sensor.cell_size
+    return bool(abs(hand[0] - target[0]) < half and abs(hand[1] - target[1]) < half)
+
+
+def goal_reached(hand, hand_vel, target, cfg: Config) -> bool:
+    """Touching with tangential speed below cfg.task.goal_speed.
+
+    Args: hand (2,) [m], hand_vel (2,) [m/s], target (2,) [m].
+    """
+    speed = math.sqrt(hand_vel[0] ** 2 + hand_vel[1] ** 2)
+    return touching(hand, target, cfg) and speed < cfg.task.goal_speed
+
+
+def curriculum_bounds(cfg: Config) -> tuple[float, float]:
+    """(initial and minimum, maximum) curriculum L-inf distance.
+
+    Args: cfg.
+    Returns: ((), ()) [m].
+    """
+    return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
+
+
+def place_trial(draws: Draws, distance: float, amplitude: float, cfg: Config):
+    """Start state at rest, target and constant force.
+
+    Args: draws, distance () [m], amplitude () [N].
+    Returns: ((4,), (2,) [m], (2,) [N]).
+    """
+    (x0, y0), (x1, y1) = field_bounds(cfg.sensor)
+    lo, hi = np.array([x0, y0]), np.array([x1, y1])
+    start = lo + np.asarray(draws.start) * (hi - lo)
+    box_lo = np.maximum(lo, start - distance)
+    box_hi = np.minimum(hi, start + distance)
+    cands = np.asarray(draws.target)
+    target = None
+    for k in range(cands.shape[0]):
+        cand = box_lo + cands[k] * (box_hi - box_lo)
+        if not touching(start, cand, cfg):
+            target = cand
+            break
+    if target is None:  # every candidate touches: take the last
+        target = box_lo + cands[-1] * (box_hi - box_lo)
+    state = np.concatenate([inverse_kinematics(start, cfg.arm), np.zeros(2)])
+    force = np.array([amplitude * (2.0 * u - 1.0) for u in draws.force])
+    return state, target, force
+
+
+def drift_target(target, hand, step_in_trial: int, cfg: Config):
+    """Move the target toward the hand by drift_per_step once the trial is drift_after old.
+
+    Args: target, hand (2,) [m], step_in_trial ().
+    Returns: ((2,) [m], bool).
+    """
+    if not step_in_trial * cfg.arm.dt >= cfg.task.drift_after:
+        return np.array(target, dtype=np.float64), False
+    gap = np.asarray(hand, dtype=np.float64) - np.asarray(target, dtype=np.float64)
+    dist = math.hypot(gap[0], gap[1])
+    if dist == 0.0:
+        return np.array(target, dtype=np.float64), False
+    if dist <= cfg.task.drift_per_step:
+        return target + gap, True
+    return target + gap * (cfg.task.drift_per_step / dist), True
+
+
+def update_curriculum(distance: float, clean_success: bool, cfg: Config) -> float:
+    """Staircase: +step after a success without drift, -step otherwise, kept in bounds.
+
+    Args: distance () [m].
+    Returns: () [m].
+    """
+    lo, hi = curriculum_bounds(cfg)
+    d = distance + (cfg.task.curriculum_step if clean_success else -cfg.task.curriculum_step)
+    return min(hi, max(lo, d))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Learner step (mirrors reach_jax.rollout.learner_step)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Learner:
+    """What one NumPy learner carries from step to step."""
+
+    layers: list  # [(W, b)] network weights
+    arm: np.ndarray  # (4,) arm state now
+    prev_arm: np.ndarray  # (4,) arm state one step before
+    prev_tau: np.ndarray  # (2,) torques one step before [N m]
+    target: np.ndarray  # (2,) [m]
+    force: np.ndarray  # (2,) this trial's constant hand force [N]
+    pending: Pending  # step awaiting its TS update
+    t: int  # steps in this trial
+    drifted: bool  # the target drifted in this trial
+    n_max: float  # N_max [steps]
+    distance: float  # curriculum distance [m]
+    trials: int = 0  # trials ended
+    steps: int = 0  # steps taken
+
+
+class StepRecord(NamedTuple):
+    """What one NumPy step did."""
+
+    x: np.ndarray  # (125,) input
+    out: np.ndarray  # (3,) outputs before the update
+    tau: np.ndarray  # (2,) [N m]
+    arm: np.ndarray  # (4,) arm state after the move (before any reset)
+    goal: bool
+    out_of_range: bool
+    cap: bool
+    loss: float
+
+
+def learner_from_jax(state) -> Learner:
+    """Copy of a `reach_jax.rollout.LearnerState` (one learner).
+
+    Args: state with (4,) arm, (2,) target etc.
+    Returns: a Learner.
+    """
+    pend = state.pending
+    return Learner(
+        layers=layers_from_flax(state.params),
+        arm=np.array(state.arm, dtype=np.float64),
+        prev_arm=np.array(state.prev_arm, dtype=np.float64),
+        prev_tau=np.array(state.prev_tau, dtype=np.float64),
+        target=np.array(state.target, dtype=np.float64),
+        force=np.array(state.force, dtype=np.float64),
+        pending=Pending(
+            x=np.array(pend.x, dtype=np.float64),
+            out=np.array(pend.out, dtype=np.float64),
+            rnd=np.array(pend.rnd, dtype=np.float64),
+            valid=bool(pend.valid),
+            terminal=bool(pend.terminal),
+            reward=float(pend.reward),
+        ),
+        t=int(state.t),
+        drifted=bool(state.drifted),
+        n_max=float(state.n_max),
+        distance=float(state.distance),
+        trials=int(state.trials),
+        steps=int(state.steps),
+    )
+
+
+def learner_step(lrn: Learner, cond: Condition, lr: float, lam: float, rnd, draws: Draws, cfg: Config):
+    """One step: observe, forward, TS update, act, RK4, outcome, reset.
+
+    Args: rnd (2,) noise in actor units, draws for a new trial.
+    Returns: (Learner, StepRecord).
+    """
+    x = observe(lrn.arm, lrn.prev_arm, lrn.prev_tau, lrn.target, cond.input_mask, cfg)
+    layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg)
+    rnd = np.array(rnd, dtype=np.float64)
+    tau = torque(out[1:], rnd, cfg)
+    moved = arm_step(lrn.arm, tau, cond.field, lrn.force, cfg.arm)
+    t = lrn.t + 1
+
+    hand = hand_position(moved[:2], cfg.arm)
+    out_of_range = is_out(moved, cfg.arm)
+    goal = (not out_of_range) and goal_reached(hand, hand_velocity(moved, cfg.arm), lrn.target, cfg)
+    cap = (not goal) and (not out_of_range) and t >= round(cfg.task.max_trial_time / cfg.arm.dt)
+    done = goal or out_of_range or cap
+    lc = cfg.learner
+    reward = lc.reward_goal if goal else (lc.reward_out if out_of_range else 0.0)
+    pending = Pending(x=x, out=out, rnd=rnd, valid=not cap, terminal=goal or out_of_range, reward=reward)
+
+    new = replace(lrn, layers=layers, pending=pending, steps=lrn.steps + 1)
+    if goal:
+        new.n_max = update_n_max(lrn.n_max, t, lam)
+    if done:
+        new.distance = update_curriculum(lrn.distance, goal and not lrn.drifted, cfg)
+        start, target, force = place_trial(draws, new.distance, cond.force_amplitude, cfg)
+        new.arm, new.prev_arm, new.prev_tau = start, start.copy(), np.zeros(2)
+        new.target, new.force, new.t, new.drifted = target, force, 0, False
+        new.trials = lrn.trials + 1
+    else:
+        target, moved_target = drift_target(lrn.target, hand, t, cfg)
+        new.arm, new.prev_arm, new.prev_tau = moved, np.array(lrn.arm), tau
+        new.target, new.t, new.drifted = target, t, lrn.drifted or moved_target
+    return new, StepRecord(x, out, tau, moved, goal, out_of_range, cap, loss)
+
+
+def draw_trial(rng: np.random.Generator, cfg: Config) -> Draws:
+    """Fresh uniform draws for one trial.
+
+    Args: rng numpy Generator.
+    Returns: Draws (start (2,), target (K, 2), force (2,)).
+    """
+    return Draws(rng.random(2), rng.random((cfg.task.target_candidates, 2)), rng.random(2))
+
+
+def init_learner(rng: np.random.Generator, cond: Condition, cfg: Config) -> Learner:
+    """Fresh NumPy learner at the initial curriculum distance.
+
+    Args: rng numpy Generator, cond.
+    Returns: a Learner.
+    """
+    n_in = cond.input_mask.shape[0]
+    distance = curriculum_bounds(cfg)[0]
+    start, target, force = place_trial(draw_trial(rng, cfg), distance, cond.force_amplitude, cfg)
+    return Learner(
+        layers=init_layers(rng, cfg),
+        arm=start,
+        prev_arm=start.copy(),
+        prev_tau=np.zeros(2),
+        target=target,
+        force=force,
+        pending=Pending(np.zeros(n_in), np.zeros(3), np.zeros(2), False, False, 0.0),
+        t=0,
+        drifted=False,
+        n_max=cfg.learner.n_max_init,
+        distance=distance,
+    )
+
+
+def run_reference(n_steps: int, seed: int, cfg: Config, condition: str = "none"):
+    """Self-contained NumPy learner for n_steps on its own RNG (benchmark).
+
+    Args: n_steps (), seed (), condition name.
+    Returns: (Learner, dict of outcome counts).
+    """
+    rng = np.random.default_rng(seed)
+    cond = make_condition(condition, cfg)
+    lrn = init_learner(rng, cond, cfg)
+    lc = cfg.learner
+    counts = {"goals": 0, "outs": 0, "caps": 0}
+    for _ in range(n_steps):
+        rnd = rng.uniform(-lc.noise, lc.noise, 2)
+        lrn, rec = learner_step(lrn, cond, lc.lr, lc.lam, rnd, draw_trial(rng, cfg), cfg)
+        counts["goals"] += rec.goal
+        counts["outs"] += rec.out_of_range
+        counts["caps"] += rec.cap
+    return lrn, counts
