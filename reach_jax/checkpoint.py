@@ -16,6 +16,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from reach_jax.config import OneLineError
+
 FORMAT_VERSION = 1
 CHECKPOINT_DIR = "checkpoints"
 CONFIG_FILE = "config.json"
@@ -23,7 +25,7 @@ METRICS_FILE = "metrics.jsonl"
 KEEP = 2  # newest checkpoints kept on disk
 
 
-class CheckpointError(ValueError):
+class CheckpointError(OneLineError):
     """A checkpoint or run directory that cannot be used; the message names the file and field."""
 
 
@@ -39,11 +41,15 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write data to path via a fsynced temporary file and a rename."""
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     _fsync_dir(path.parent)
 
 

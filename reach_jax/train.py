@@ -22,7 +22,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from reach_jax import checkpoint, rollout, task
-from reach_jax.config import CONDITIONS, Config, TrainConfig, from_dict, to_dict, to_json, tuplify
+from reach_jax.config import (
+    CONDITIONS,
+    Config,
+    OneLineError,
+    TrainConfig,
+    from_dict,
+    printable,
+    to_dict,
+    to_json,
+    tuplify,
+)
 from reach_jax.progress import Progress
 
 EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
@@ -262,7 +272,7 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
     return batch
 
 
-class UsageError(ValueError):
+class UsageError(OneLineError):
     """Bad command-line input; the message is one line."""
 
 
@@ -436,15 +446,15 @@ def main(argv=None) -> int:
     try:
         inv = parse(argv)
     except (UsageError, checkpoint.CheckpointError) as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {printable(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
     try:
         run(inv.cfg, inv.run_dir, resume=inv.resume, progress=not inv.quiet)
     except NumericsError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {printable(str(exc))}", file=sys.stderr)
         return EXIT_NUMERICS
     except OSError as exc:
-        print(f"{prog}: error: write failed, last good checkpoint kept: {exc}", file=sys.stderr)
+        print(f"{prog}: error: write failed, last good checkpoint kept: {printable(str(exc))}", file=sys.stderr)
         return EXIT_IO
     print(f"run written to {inv.run_dir}", file=sys.stderr)
     return 0

@@ -1,0 +1,270 @@
+"""Long runs that survive interruption: resume, atomic checkpoints, numerics guard, clear errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from reach_jax import checkpoint, rollout, train
+from reach_jax.config import Config, TrainConfig, from_dict, printable, to_dict
+
+ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
+
+
+def cfg_of(argv) -> Config:
+    return train.parse([*argv, "--out", "/nonexistent-parse-only"]).cfg
+
+
+def snapshot(folder: Path) -> dict:
+    """Every file under folder with its size and modification time."""
+    return {str(p): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def final_arrays(run_dir: Path) -> tuple[str, dict]:
+    path = checkpoint.list_checkpoints(run_dir)[-1]
+    with np.load(path) as data:
+        return path.name, {k: data[k] for k in data.files if k != "__meta__"}
+
+
+def metrics_without_wall(run_dir: Path) -> list[dict]:
+    rows = [json.loads(x) for x in (run_dir / checkpoint.METRICS_FILE).read_text().splitlines()]
+    return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("whole") / "run"
+    assert train.main([*ARGV, "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path):
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "reach_jax.train", *ARGV, "--out", str(out), "--quiet"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        done = checkpoint.list_checkpoints(out)
+        if done and done[-1].name >= checkpoint.checkpoint_path(out, 3).name:
+            proc.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.01)
+    assert proc.wait() == -signal.SIGKILL, "the run finished before it could be killed"
+    killed_at = checkpoint.list_checkpoints(out)[-1]
+    assert train.main(["--resume", str(out), "--quiet"]) == 0
+    name, arrays = final_arrays(out)
+    want_name, want = final_arrays(uninterrupted)
+    assert name == want_name and name > killed_at.name
+    assert arrays.keys() == want.keys()
+    for k in want:
+        np.testing.assert_array_equal(arrays[k], want[k], err_msg=k)
+    assert metrics_without_wall(out) == metrics_without_wall(uninterrupted)
+
+
+def test_metrics_past_the_checkpoint_and_torn_lines_are_dropped_on_resume(tmp_path):
+    out = tmp_path / "run"
+    argv = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "100"]
+    assert train.main([*argv, "--out", str(out), "--quiet"]) == 0
+    good = (out / checkpoint.METRICS_FILE).read_text()
+    last = json.loads(good.splitlines()[-1])["chunk"]
+    later = json.dumps({"chunk": last + 1, "learner": 0})
+    (out / checkpoint.METRICS_FILE).write_text(good + later + "\n" + '{"chunk": ')
+    assert train.main(["--resume", str(out), "--quiet"]) == 0
+    assert (out / checkpoint.METRICS_FILE).read_text() == good
+
+
+def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupted, tmp_path, capsys):
+    def broken_copy(name):
+        dst = tmp_path / name
+        dst.mkdir()
+        for p in uninterrupted.rglob("*"):
+            if p.is_file():
+                target = dst / p.relative_to(uninterrupted)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(p.read_bytes())
+        return dst, checkpoint.list_checkpoints(dst)[-1]
+
+    run, newest = broken_copy("truncated")
+    newest.write_bytes(newest.read_bytes()[: newest.stat().st_size // 2])
+    cases = [(run, str(newest))]
+    run, newest = broken_copy("garbage")
+    newest.write_bytes(b"not a checkpoint at all")
+    cases.append((run, str(newest)))
+    run, newest = broken_copy("version")
+    with np.load(newest) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(arrays["__meta__"].tobytes())
+    meta["format_version"] = checkpoint.FORMAT_VERSION + 1
+    arrays["__meta__"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    np.savez(newest, **arrays)
+    cases.append((run, "format_version"))
+    run, _ = broken_copy("config_version")
+    data = json.loads((run / checkpoint.CONFIG_FILE).read_text())
+    data["version"] = 99
+    (run / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
+    cases.append((run, "version"))
+    run, _ = broken_copy("edited_config")
+    data = json.loads((run / checkpoint.CONFIG_FILE).read_text())
+    data["learner"]["lr"] = 0.123
+    (run / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
+    cases.append((run, "config.learner.lr"))
+    run, _ = broken_copy("flag_disagrees")
+    cases.append((run, "train.trials"))
+    for run, must_name in cases:
+        before = snapshot(run)
+        extra = ["--trials", "151"] if run.name == "flag_disagrees" else []
+        assert train.main(["--resume", str(run), *extra, "--quiet"]) == train.EXIT_USAGE
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and must_name in err, (run.name, err)
+        assert snapshot(run) == before
+
+
+class _Injected:
+    """Chunk wrapper that turns learner 1's parameters to NaN on its third call."""
+
+    def __init__(self, real):
+        self.real, self.calls = real, 0
+
+    def __call__(self, states, *args):
+        states = self.real(states, *args)
+        self.calls += 1
+        if self.calls == 3:
+            states = states.replace(params=jax.tree.map(lambda x: x.at[1].set(jnp.nan), states.params))
+        return states
+
+
+def test_non_finite_learner_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsys):
+    real = rollout.make_chunk
+    monkeypatch.setattr(rollout, "make_chunk", lambda cfg, n: _Injected(real(cfg, n)))
+    out = tmp_path / "run"
+    assert train.main([*ARGV, "--out", str(out), "--quiet"]) == train.EXIT_NUMERICS
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "learner 1 (condition random, seed 0)" in err
+    newest = checkpoint.list_checkpoints(out)[-1]
+    assert newest == checkpoint.checkpoint_path(out, 2)
+    batch, _ = train.load_batch(out, train.read_config(out))
+    assert bool(np.all(np.asarray(train.finite_learners(batch.states))))
+    assert max(json.loads(x)["chunk"] for x in (out / checkpoint.METRICS_FILE).read_text().splitlines()) == 2
+
+
+def test_failed_write_stops_cleanly_and_keeps_the_previous_checkpoint(tmp_path, monkeypatch, capsys):
+    real_fsync, calls = os.fsync, {"n": 0}
+
+    def failing_fsync(fd):
+        # Fail while the fourth checkpoint's temporary file is being flushed.
+        if os.readlink(f"/proc/self/fd/{fd}").endswith(".chunk_0000003.npz.tmp"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        calls["n"] += 1
+        return real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", failing_fsync)
+    out = tmp_path / "run"
+    assert train.main([*ARGV, "--out", str(out), "--quiet"]) == train.EXIT_IO
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "No space left on device" in err
+    newest = checkpoint.list_checkpoints(out)[-1]
+    assert newest == checkpoint.checkpoint_path(out, 2)
+    train.load_batch(out, train.read_config(out))
+
+
+FLAGS = [
+    "--trials",
+    "--seeds",
+    "--conditions",
+    "--seed",
+    "--chunk-steps",
+    "--out",
+    "--resume",
+    "--lr",
+    "--noise",
+    "--lam",
+    "--set",
+    "--quiet",
+]
+VALUES = st.one_of(
+    st.text(max_size=12),
+    st.sampled_from(
+        [
+            "0",
+            "-1",
+            "1e9",
+            "2e6",
+            "nan",
+            "inf",
+            "3.5",
+            "none,viscous",
+            "random_nopast",
+            "sideways",
+            "task.drift_after=2",
+            'arm.dt="x"',
+            "learner.lr=1",
+            "x.y=1",
+            "0.5,1",
+            "",
+        ]
+    ),
+    st.integers(-5, 10**10).map(str),
+)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(argv=st.lists(st.one_of(st.sampled_from(FLAGS), VALUES), max_size=6))
+def test_fuzzed_command_lines_never_crash(argv, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    before = snapshot(tmp_path)
+    try:
+        inv = train.parse(argv)
+    except (train.UsageError, checkpoint.CheckpointError) as exc:
+        assert str(exc) and "\n" not in str(exc)
+    except SystemExit as exc:  # --help and friends
+        assert exc.code == 0
+    else:
+        assert isinstance(inv.cfg, Config) and inv.cfg.train.trials >= 1
+    assert snapshot(tmp_path) == before
+
+
+JSONISH = st.recursive(
+    st.one_of(st.none(), st.booleans(), st.integers(), st.floats(allow_nan=True), st.text(max_size=5)),
+    lambda children: st.one_of(
+        st.lists(children, max_size=4), st.dictionaries(st.text(max_size=12), children, max_size=4)
+    ),
+    max_leaves=12,
+)
+SECTIONS = {f.name: f.default_factory() for f in dataclasses.fields(Config)}
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    section=st.sampled_from(sorted(SECTIONS)),
+    field=st.one_of(
+        st.text(max_size=8), st.sampled_from([f.name for s in SECTIONS.values() for f in dataclasses.fields(s)])
+    ),
+    value=JSONISH,
+)
+def test_fuzzed_config_files_parse_or_fail_with_one_line(section, field, value):
+    data = json.loads(json.dumps(to_dict(Config())))
+    data[section][field] = value
+    try:
+        cfg = from_dict(data)
+    except ValueError as exc:
+        assert str(exc) and "\n" not in str(exc) and printable(field) in str(exc)
+    else:
+        assert isinstance(cfg, Config)
+        assert isinstance(cfg.train, TrainConfig)
