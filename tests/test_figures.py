@@ -1,0 +1,98 @@
+"""Figures: each panel shows what its title claims, built from synthetic movements with known content."""
+
+from __future__ import annotations
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+from reach_jax import evaluate, figures
+from reach_jax.config import Config
+
+CFG = Config()
+
+
+@pytest.fixture(autouse=True)
+def _close():
+    yield
+    figures.close_all()
+
+
+def corner_episodes():
+    starts, targets, corner = evaluate.corner_pairs(CFG)
+    return evaluate.minimum_jerk_episodes(starts, targets, CFG), starts, targets, corner
+
+
+def path_lines(ax):
+    return [line for line in ax.get_lines() if line.get_marker() not in (None, "None", "")]
+
+
+def test_fig4_has_six_labelled_panels_with_paths_field_and_goal_squares(tmp_path):
+    ep, starts, targets, corner = corner_episodes()
+    panels = {letter: ep for letter, _, _ in evaluate.FIG4_PANELS if letter != "f"}
+    fig = figures.fig4(panels, starts, targets, corner, CFG)
+    axes = fig.axes
+    assert len(axes) == 6
+    for ax, (letter, learning, test) in zip(axes, evaluate.FIG4_PANELS, strict=True):
+        title = ax.get_title()
+        assert f"({letter})" in title and f"learning: {learning}" in title and f"test: {test}" in title
+        # 4 goal squares around the corner targets and the field outline.
+        assert len(ax.patches) == 5
+        # The 5 x 5 cell grid: 6 vertical and 6 horizontal lines.
+        grid = [line for line in ax.get_lines() if line not in path_lines(ax)]
+        assert len(grid) == 2 * (CFG.sensor.n_cells + 1)
+    for ax in axes[:5]:
+        lines = path_lines(ax)
+        assert len(lines) == 12
+        ends = sorted(tuple(np.round(line.get_xydata()[0], 6)) for line in lines)
+        assert ends == sorted(tuple(np.round(s, 6)) for s in starts)
+        assert "12-0-0" in ax.get_title()
+    assert path_lines(axes[5]) == []
+    assert any("no random network" in t.get_text() for t in axes[5].texts)
+    fig.savefig(tmp_path / "fig4.png")
+    assert matplotlib.image.imread(tmp_path / "fig4.png").shape[2] in (3, 4)
+
+
+def test_fig5_plots_speed_over_time_for_panels_a_and_d():
+    ep, _, _, corner = corner_episodes()
+    fig = figures.fig5({"a": ep, "d": ep}, corner, CFG)
+    axes = fig.axes
+    assert len(axes) == 2
+    assert "(a)" in axes[0].get_title() and "(d)" in axes[1].get_title()
+    for ax in axes:
+        lines = path_lines(ax)
+        assert len(lines) == 12
+        t, v = lines[0].get_xydata().T
+        np.testing.assert_allclose(np.diff(t), CFG.arm.dt)
+        np.testing.assert_allclose(v, ep.speed[0, : ep.steps[0] + 1])
+    assert "time" in axes[0].get_xlabel() and "speed" in axes[0].get_ylabel()
+
+
+def test_learning_curves_draw_one_line_per_learner_in_every_panel():
+    rows = [
+        {
+            "learner": i,
+            "condition": cond,
+            "seed": 0,
+            "trials": 100 * (c + 1),
+            "success_rate": 0.1 * c + i,
+            "out_rate": 0.0,
+            "mean_trial_s": 1.0 + c,
+            "distance_m": 0.064 + 0.001 * c,
+        }
+        for c in range(3)
+        for i, cond in enumerate(("none", "viscous"))
+    ]
+    fig = figures.learning_curves(rows, CFG)
+    assert [ax.get_ylabel() for ax in fig.axes] == [label for _, label in figures.LEARNING_CURVES]
+    for ax, (key, _) in zip(fig.axes, figures.LEARNING_CURVES, strict=True):
+        lines = path_lines(ax)
+        assert len(lines) == 2
+        np.testing.assert_allclose(lines[1].get_xdata(), [100, 200, 300])
+        np.testing.assert_allclose(lines[1].get_ydata(), [r[key] for r in rows if r["learner"] == 1])
+    assert fig.axes[-1].get_xlabel() == "trials per learner"
+
+
+def test_learning_curves_without_metrics_say_so():
+    fig = figures.learning_curves([], CFG)
+    assert any("no finished chunk" in t.get_text() for t in fig.axes[0].texts)
