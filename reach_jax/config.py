@@ -75,7 +75,7 @@ class LearnerConfig:
     n_max_init: float = 100.0  # N_max[0] [steps] (choice)
     lr: float = 1.0  # SGD learning rate on squared error (SPEC §11 choice)
     noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (SPEC §11 choice)
-    critic_floor: float = -0.4  # non-terminal critic targets never go below it: anti-collapse guard (choice)
+    critic_floor: float = -0.3  # non-terminal critic targets never go below it, so "out" is always worse (choice)
 
 
 @dataclass(frozen=True)
