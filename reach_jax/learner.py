@@ -3,6 +3,11 @@
 Units: critic and actor values are network outputs in (-0.5, 0.5); N_max and trial lengths are steps.
 The update for the transition x(t-1) -> x(t) runs at step t, once p(t) is known. A trial's last
 transition is updated at the first step of the next trial, so every step does exactly one backprop.
+
+Hot-path economy: the layer-1 pre-activation of x(t-1) under W(t) is carried in `Pending.u1` instead of
+being recomputed. At step t-1 the forward pass computed u1 = x(t-1) W1(t-1) + b1(t-1); the only change
+since is the rank-1 SGD step W1 -= lr x(t-2) delta1^T, b1 -= lr delta1, so
+u1 under W(t) = u1 - lr delta1 (x(t-2) . x(t-1) + 1). The biggest matrix product then runs once a step.
 """
 
 from __future__ import annotations
@@ -11,7 +16,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import optax
 
 from reach_jax import network
 from reach_jax.config import Config, LearnerConfig
@@ -26,10 +30,16 @@ class Pending(NamedTuple):
     valid: jax.Array  # () bool: False at the first step of a run or after a capped trial
     terminal: jax.Array  # () bool: the transition ended its trial at the goal or a limit
     reward: jax.Array  # () reinforcement that ended the trial, 0 otherwise
+    u1: jax.Array | None = None  # (30,) layer-1 pre-activation of x under the current weights; None: recompute
 
 
-def empty_pending(n_in: int) -> Pending:
-    """A Pending that triggers no update."""
+def empty_pending(n_in: int, n_hidden: int | None = None) -> Pending:
+    """A Pending that triggers no update.
+
+    Args:
+      n_in: number of network inputs (125).
+      n_hidden: width of the first hidden layer (30); None leaves `u1` unset (recomputed when needed).
+    """
     return Pending(
         x=jnp.zeros(n_in),
         out=jnp.zeros(3),
@@ -37,6 +47,7 @@ def empty_pending(n_in: int) -> Pending:
         valid=jnp.array(False),
         terminal=jnp.array(False),
         reward=jnp.array(0.0),
+        u1=None if n_hidden is None else jnp.zeros(n_hidden),
     )
 
 
@@ -58,9 +69,60 @@ def update_n_max(n_max: jax.Array, n_steps: jax.Array, lam: jax.Array) -> jax.Ar
     return jnp.where(n_steps > lam * n_max, n_steps.astype(n_max.dtype), lam * n_max)
 
 
-def optimizer(lr: jax.Array) -> optax.GradientTransformation:
-    """Plain SGD on squared error, as in error backpropagation."""
-    return optax.sgd(lr)
+def _squash_slope(y: jax.Array) -> jax.Array:
+    """f'(u) written through y = f(u): (0.5 + y)(0.5 - y), as in the oracle."""
+    return (0.5 + y) * (0.5 - y)
+
+
+def ts_step(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: jax.Array, cfg: Config):
+    """Forward x(t), then one TS backprop step on x(t-1) by hand-written SGD; the rollout's hot path.
+
+    Args:
+      params: network parameters W(t) (flax layout of `network.ActorCritic`).
+      x_now: (125,) input x(t).
+      pending: the step t-1; its `u1` (30,), if set, is x(t-1)'s layer-1 pre-activation under W(t).
+      n_max: () N_max [steps].
+      lr: () learning rate; 0 freezes the weights exactly.
+      cfg: model config.
+
+    Returns:
+      (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss (),
+      (30,) layer-1 pre-activation of x(t) under W(t+1), to carry as the next Pending.u1).
+    """
+    layers = network.dense_layers(params)
+    w1, b1 = layers[0]
+    # Per-learner matrix-vector product as multiply-and-reduce: under vmap XLA fuses it into one loop
+    # instead of a batched dot with a tiny matrix per learner.
+    u1_now = jnp.sum(x_now[:, None] * w1, axis=0) + b1
+    u1_prev = pending.u1 if pending.u1 is not None else jnp.sum(pending.x[:, None] * w1, axis=0) + b1
+    # acts[i] = (input of layer i for x(t), for x(t-1)); the raw input row of x(t) is not needed again.
+    # Each row is its own multiply-and-reduce over the leading axis: a stacked (2, n) @ W as one
+    # reduction over the middle axis compiled to a far slower kernel on CPU (measured, layer 2 alone
+    # cost more than layer 1).
+    acts = [(x_now, pending.x), (network.squash(u1_now), network.squash(u1_prev))]
+    for w, b in layers[1:]:
+        acts.append(tuple(network.squash(jnp.sum(a[:, None] * w, axis=0) + b) for a in acts[-1]))
+    out_now, out_prev = acts[-1]
+
+    target = ts_targets(pending, out_now[0], n_max, cfg.learner)
+    err = jnp.where(pending.valid, target - out_prev, 0.0)
+    loss = 0.5 * jnp.sum(err**2)
+    step = jnp.where(pending.valid, lr, 0.0)
+    # Backprop on the x(t-1) row, through the old weights; the SGD step of each layer follows.
+    delta = -err * _squash_slope(out_prev)
+    new_layers = [None] * len(layers)
+    for i in range(len(layers) - 1, -1, -1):
+        w, b = layers[i]
+        below = acts[i][1]
+        scaled = step * delta
+        if i > 0:
+            delta_below = jnp.sum(w * delta, axis=1) * _squash_slope(below)
+        new_layers[i] = (w - below[:, None] * scaled, b - scaled)
+        if i > 0:
+            delta = delta_below
+    bias_input = 1.0 if cfg.network.use_bias else 0.0
+    u1_next = u1_now - step * delta * (jnp.dot(pending.x, x_now) + bias_input)
+    return network.with_dense_layers(params, new_layers), out_now, loss, u1_next
 
 
 def ts_update(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: jax.Array, cfg: Config):
@@ -77,14 +139,5 @@ def ts_update(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss ()).
     """
-
-    def loss_fn(p):
-        out = network.apply(p, jnp.stack([x_now, pending.x]), cfg)
-        target = jax.lax.stop_gradient(ts_targets(pending, out[0, 0], n_max, cfg.learner))
-        err = target - out[1]
-        return 0.5 * jnp.where(pending.valid, jnp.sum(err**2), 0.0), out[0]
-
-    (loss, out_now), grads = jax.value_and_grad(loss_fn, has_aux=True)(params)
-    tx = optimizer(lr)
-    updates, _ = tx.update(grads, tx.init(params), params)
-    return optax.apply_updates(params, updates), out_now, loss
+    new, out_now, loss, _ = ts_step(params, x_now, pending, n_max, lr, cfg)
+    return new, out_now, loss

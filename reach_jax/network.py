@@ -53,6 +53,26 @@ def apply(params, x: jax.Array, cfg: Config) -> jax.Array:
     return ActorCritic(cfg.network).apply(params, x)
 
 
+def dense_layers(params) -> list[tuple[jax.Array, jax.Array]]:
+    """(kernel (n_in, n_out), bias (n_out,)) per layer from the flax tree; a missing bias reads as zeros."""
+    p = params["params"]
+    out = []
+    for i in range(len(p)):
+        d = p[f"Dense_{i}"]
+        kernel = d["kernel"]
+        out.append((kernel, d["bias"] if "bias" in d else jnp.zeros(kernel.shape[1], kernel.dtype)))
+    return out
+
+
+def with_dense_layers(params, layers) -> dict:
+    """The flax tree of `params` holding new (kernel, bias) per layer; biases stay absent if they were."""
+    new = {}
+    for i, (kernel, bias) in enumerate(layers):
+        old = params["params"][f"Dense_{i}"]
+        new[f"Dense_{i}"] = {"kernel": kernel, **({"bias": bias} if "bias" in old else {})}
+    return {**params, "params": new}
+
+
 def torque(m: jax.Array, rnd: jax.Array, cfg: Config) -> jax.Array:
     """tau_i = 2 tau_max_i (m_i + rnd_i), clipped to +-tau_max_i: (2,) actor + noise -> (2,) [N m]."""
     tau_max = jnp.asarray(cfg.arm.tau_max)

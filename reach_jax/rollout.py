@@ -3,18 +3,49 @@
 Units: arm state [rad, rad/s], torques [N m], positions [m], forces [N]; counts are steps or trials.
 A step: observe, forward pass, TS update on the previous input, act, RK4. Trials end at the goal, at a
 joint limit or at the safety cap, and reset inside the scan from the learner's own key.
+
+Scale: `make_chunk` shards the learner axis over devices with `jax.shard_map`. Learners never interact, so
+each device runs its own slice with no communication; the same code runs on CPU host devices, GPU, TPU or
+several hosts (after `jax.distributed.initialize`), only the device list changes.
 """
 
 from __future__ import annotations
 
+import os
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
+from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from reach_jax import arm, learner, network, task
 from reach_jax.config import Config, n_inputs
+
+# XLA:CPU hands small reductions to YNNPACK by default; for the per-learner 30x10 and 10x3 products that
+# made the step ~1.6x slower at 128 learners (benchmarks/throughput.py). Keep YNNPACK for real dots only.
+# The option exists only in the CPU compiler; other backends ignore it.
+CPU_XLA_FLAGS = "--xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT"
+
+
+def configure_backend(devices: int | None = None, multihost: bool = False) -> None:
+    """Set up JAX before its first computation: CPU compiler options, host device count, multi-host.
+
+    Args:
+      devices: on CPU, the number of host devices to expose (one per core is the useful maximum);
+        None keeps the default (one). Ignored by GPU/TPU backends, whose devices are physical.
+      multihost: join a multi-process run with `jax.distributed.initialize()`, which reads its coordinator,
+        process count and id from the cluster environment (SLURM, Open MPI, Cloud TPU) or from
+        JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID.
+    """
+    name = CPU_XLA_FLAGS.split("=")[0]
+    if name not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {CPU_XLA_FLAGS}".strip()
+    if devices is not None:
+        jax.config.update("jax_num_cpu_devices", devices)
+    if multihost:
+        jax.distributed.initialize()
 
 
 @struct.dataclass
@@ -97,7 +128,7 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
         prev_tau=jnp.zeros(2),
         target=target,
         force=force,
-        pending=learner.empty_pending(n_inputs(cfg)),
+        pending=learner.empty_pending(n_inputs(cfg), cfg.network.hidden[0]),
         t=jnp.array(0, jnp.int32),
         drifted=jnp.array(False),
         n_max=jnp.asarray(cfg.learner.n_max_init),
@@ -108,13 +139,37 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
     )
 
 
-def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: Config):
-    """One learning step of one learner; returns (new state, StepInfo)."""
-    key, k_act, k_trial = jax.random.split(state.key, 3)
-    x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
-    params, out, loss = learner.ts_update(state.params, x, state.pending, state.n_max, hyper.lr, cfg)
+def n_uniforms(cfg: Config) -> int:
+    """Uniform draws one step consumes: 2 for the exploration noise, then one new trial's TrialDraws."""
+    return 2 + 2 + 2 * cfg.task.target_candidates + 2
 
-    rnd = jax.random.uniform(k_act, (2,), minval=-hyper.noise, maxval=hyper.noise)
+
+def split_uniforms(u: jax.Array, noise: jax.Array, cfg: Config) -> tuple[jax.Array, task.TrialDraws]:
+    """(n_uniforms,) draws in [0, 1) -> ((2,) rnd ~ U(-noise, noise), TrialDraws of a possible new trial)."""
+    k = cfg.task.target_candidates
+    rnd = noise * (2.0 * u[:2] - 1.0)
+    draws = task.TrialDraws(start=u[2:4], target=u[4 : 4 + 2 * k].reshape(k, 2), force=u[4 + 2 * k : 6 + 2 * k])
+    return rnd, draws
+
+
+def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: Config, active=None):
+    """One learning step of one learner; returns (new state, StepInfo).
+
+    Args:
+      state: the learner.
+      cond: its condition.
+      hyper: its learning constants.
+      cfg: model config.
+      active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
+    """
+    # One key split and one batch of uniforms per step: every random call is a separate threefry pass,
+    # which dominated the environment's cost when noise and trial draws each had their own.
+    key, k_step = jax.random.split(state.key)
+    rnd, draws = split_uniforms(jax.random.uniform(k_step, (n_uniforms(cfg),)), hyper.noise, cfg)
+    x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
+    lr = hyper.lr if active is None else jnp.where(active, hyper.lr, 0.0)
+    params, out, loss, u1 = learner.ts_step(state.params, x, state.pending, state.n_max, lr, cfg)
+
     tau = network.torque(out[1:], rnd, cfg)
     moved = arm.step(state.arm, tau, cond.field, state.force, cfg.arm)
     t = state.t + 1
@@ -133,6 +188,7 @@ def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: C
         valid=~cap,
         terminal=goal | out_of_range,
         reward=jnp.where(goal, lc.reward_goal, 0.0) + jnp.where(out_of_range, lc.reward_out, 0.0),
+        u1=u1,
     )
 
     # Continue the trial: the target drifts once the trial runs long.
@@ -150,7 +206,6 @@ def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: C
     # Or start a new one, with the curriculum and N_max updated by the trial that ended.
     n_max = jnp.where(goal, learner.update_n_max(state.n_max, t, hyper.lam), state.n_max)
     distance = jnp.where(done, task.update_curriculum(state.distance, goal & ~state.drifted, cfg), state.distance)
-    draws = task.draw_trial(k_trial, cfg)
     start, new_target, force = task.place_trial(draws, distance, cond.force_amplitude, cfg)
     fresh = dict(
         arm=start,
@@ -190,17 +245,58 @@ def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: C
 
 
 def budgeted_step(state: LearnerState, cond: task.Condition, hyper: Hyper, budget: jax.Array, cfg: Config):
-    """learner_step, except that a learner which has ended `budget` trials stays frozen."""
-    new, info = learner_step(state, cond, hyper, cfg)
+    """learner_step, except that a learner which has ended `budget` trials stays frozen.
+
+    Args:
+      state, cond, hyper: one learner, as for learner_step.
+      budget: () trials per learner.
+      cfg: model config.
+    """
     active = state.trials < budget
-    return jax.tree.map(lambda a, b: jnp.where(active, a, b), new, state), info
+    new, info = learner_step(state, cond, hyper, cfg, active=active)
+    # The weights of a frozen learner already stay put (zero step size), so the select skips the
+    # largest arrays instead of copying them once more every step.
+    rest = jax.tree.map(lambda a, b: jnp.where(active, a, b), new.replace(params=None), state.replace(params=None))
+    return rest.replace(params=new.params), info
 
 
-def make_chunk(cfg: Config, n_steps: int):
+def learner_mesh(n_learners: int, devices=None) -> Mesh:
+    """1-D mesh ("learners") over the most devices that split n_learners evenly.
+
+    Args:
+      n_learners: batch size.
+      devices: devices to use (default: every device of every process, `jax.devices()`).
+    """
+    devices = list(jax.devices() if devices is None else devices)
+    n = max(d for d in range(1, len(devices) + 1) if n_learners % d == 0)
+    return Mesh(np.array(devices[:n]), ("learners",))
+
+
+def shard_learners(tree, mesh: Mesh):
+    """Place a batched pytree (learner axis first) on `mesh`, split along the learner axis.
+
+    Works across processes: every process holds the same full host values and keeps its own slices.
+    """
+    sharding = NamedSharding(mesh, PartitionSpec("learners"))
+
+    def place(a):
+        host = np.asarray(a)
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+    return jax.tree.map(place, tree)
+
+
+def make_chunk(cfg: Config, n_steps: int, devices=None):
     """Compiled run of n_steps steps for a batch of learners: (states, conds, hypers, budget) -> states.
 
     The learner axis is the leading axis of every argument; `budget` is a () trial count per learner.
-    Stats are reset at the start of the chunk, so they describe this chunk alone.
+    Stats are reset at the start of the chunk, so they describe this chunk alone. The learner axis is
+    sharded over `learner_mesh(n_learners, devices)`; the states buffers are donated.
+
+    Args:
+      cfg: model config.
+      n_steps: learner steps per call.
+      devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
     """
     batched = jax.vmap(lambda s, c, h, b: budgeted_step(s, c, h, b, cfg)[0], in_axes=(0, 0, 0, None))
 
@@ -213,7 +309,35 @@ def make_chunk(cfg: Config, n_steps: int):
         states, _ = jax.lax.scan(step_body, states, None, length=n_steps)
         return states
 
-    return jax.jit(chunk, donate_argnums=0)
+    compiled = {}
+
+    def run(states, conds, hypers, budget):
+        n_learners = jax.tree.leaves(states)[0].shape[0]
+        mesh = learner_mesh(n_learners, devices)
+        if mesh.size not in compiled:
+            if mesh.size == 1:
+                compiled[mesh.size] = (None, jax.jit(chunk, donate_argnums=0))
+            else:
+                spec = PartitionSpec("learners")
+                mapped = jax.shard_map(
+                    chunk, mesh=mesh, in_specs=(spec, spec, spec, PartitionSpec()), out_specs=spec, check_vma=False
+                )
+                compiled[mesh.size] = (mesh, jax.jit(mapped, donate_argnums=0))
+        mesh, fn = compiled[mesh.size]
+        if mesh is not None:
+            states, conds, hypers = (_on_mesh(t, mesh) for t in (states, conds, hypers))
+        return fn(states, conds, hypers, budget)
+
+    return run
+
+
+def _on_mesh(tree, mesh: Mesh):
+    """tree unchanged if it is already split over mesh along the learner axis, else placed there."""
+    want = NamedSharding(mesh, PartitionSpec("learners"))
+    leaves = jax.tree.leaves(tree)
+    if all(isinstance(a, jax.Array) and a.sharding.is_equivalent_to(want, a.ndim) for a in leaves):
+        return tree
+    return shard_learners(tree, mesh)
 
 
 def make_trace(cfg: Config, n_steps: int):

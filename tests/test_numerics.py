@@ -385,9 +385,9 @@ def test_trial_placement_and_drift_match_oracle():
 
 ROLLOUT_STEPS = 200
 # A 1.2 s cap (60 steps) so that trials end at the cap, at the goal and at a limit within 200 steps, and the
-# target drifts (after 1 s) in the capped trials. Seeds 0 and 4 together exercise all three ways to end a trial.
+# target drifts (after 1 s) in the capped trials. Seeds 2 and 4 together exercise all three ways to end a trial.
 ROLLOUT_CFG = dataclasses.replace(CFG, task=dataclasses.replace(TaskConfig(), max_trial_time=1.2))
-ROLLOUT_SEEDS = (0, 4)
+ROLLOUT_SEEDS = (2, 4)
 
 
 def test_rollout_replays_in_oracle():
