@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
+from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from reach_jax import arm, learner, network, task
@@ -284,6 +285,13 @@ def shard_learners(tree, mesh: Mesh):
         return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
 
     return jax.tree.map(place, tree)
+
+
+def to_host(tree):
+    """tree with every array whole on this process: itself on one host, an all-gather across hosts."""
+    if jax.process_count() == 1:
+        return tree
+    return jax.tree.map(jnp.asarray, multihost_utils.process_allgather(tree, tiled=True))
 
 
 def make_chunk(cfg: Config, n_steps: int, devices=None):

@@ -252,6 +252,8 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
         states = run_chunk(batch.states, batch.conds, batch.hypers, budget)
         batch = batch._replace(states=states)
         chunk += 1
+        # Every learner on this process (a no-op on one host; an all-gather across hosts with --multihost).
+        states = rollout.to_host(states)
         ok = np.asarray(finite_learners(states))
         if not ok.all():
             i = int(np.argmin(ok))
@@ -262,8 +264,9 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
                 f"last good checkpoint kept: {last}"
             )
         rows = metrics_rows(states, table, chunk, time.monotonic() - started, cfg)
-        checkpoint.append_lines(run_dir / checkpoint.METRICS_FILE, [json.dumps(r) for r in rows])
-        write_checkpoint(run_dir, chunk, batch, cfg)
+        if jax.process_index() == 0:  # one writer when several hosts share the run directory
+            checkpoint.append_lines(run_dir / checkpoint.METRICS_FILE, [json.dumps(r) for r in rows])
+            write_checkpoint(run_dir, chunk, batch._replace(states=states), cfg)
         if bar:
             bar.update(int(np.minimum(np.asarray(states.trials), cfg.train.trials).sum()), status_line(rows))
     if bar:
@@ -367,6 +370,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="run directory (default runs/<name>)")
     p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a run from its newest checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--devices",
+        type=_positive_int,
+        help="CPU only: host devices to shard learners over, one per core at most (default 1)",
+    )
+    p.add_argument(
+        "--multihost",
+        action="store_true",
+        help="join a multi-process run via jax.distributed.initialize (cluster env or JAX_COORDINATOR_ADDRESS, "
+        "JAX_NUM_PROCESSES, JAX_PROCESS_ID); process 0 writes the shared run directory",
+    )
     return p
 
 
@@ -444,6 +458,9 @@ def main(argv=None) -> int:
     """CLI entry point; returns the exit status."""
     prog = build_parser().prog
     try:
+        args = build_parser().parse_args(argv)
+        # Device count and multi-host must be fixed before JAX's first computation.
+        rollout.configure_backend(args.devices, args.multihost)
         inv = parse(argv)
     except (UsageError, checkpoint.CheckpointError) as exc:
         print(f"{prog}: error: {printable(str(exc))}", file=sys.stderr)
