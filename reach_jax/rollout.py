@@ -30,6 +30,18 @@ from reach_jax.config import Config, n_inputs
 CPU_XLA_FLAGS = "--xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT"
 
 
+def add_cpu_xla_flags() -> None:
+    """Append CPU_XLA_FLAGS to XLA_FLAGS unless set; takes effect if JAX's backend has not started yet."""
+    name = CPU_XLA_FLAGS.split("=")[0]
+    if name not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {CPU_XLA_FLAGS}".strip()
+
+
+# At import, before any computation: every process that trains (CLI, tests, subprocesses) then compiles
+# the same kernels, so a run resumed in another process stays bit-identical.
+add_cpu_xla_flags()
+
+
 def configure_backend(devices: int | None = None, multihost: bool = False) -> None:
     """Set up JAX before its first computation: CPU compiler options, host device count, multi-host.
 
@@ -40,9 +52,7 @@ def configure_backend(devices: int | None = None, multihost: bool = False) -> No
         process count and id from the cluster environment (SLURM, Open MPI, Cloud TPU) or from
         JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID.
     """
-    name = CPU_XLA_FLAGS.split("=")[0]
-    if name not in os.environ.get("XLA_FLAGS", ""):
-        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {CPU_XLA_FLAGS}".strip()
+    add_cpu_xla_flags()
     if devices is not None:
         jax.config.update("jax_num_cpu_devices", devices)
     if multihost:
