@@ -16,6 +16,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import optax
 
 from reach_jax import network
 from reach_jax.config import Config, LearnerConfig
@@ -126,7 +127,9 @@ def ts_step(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: ja
 
 
 def ts_update(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: jax.Array, cfg: Config):
-    """Forward x(t), then one TS backprop step on x(t-1), in a single fused pass.
+    """The TS step by its readable definition: flax forward, autodiff backprop, optax SGD.
+
+    `ts_step` is the hand-written fast path used in training; tests hold the two equal.
 
     Args:
       params: network parameters W(t).
@@ -139,5 +142,14 @@ def ts_update(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss ()).
     """
-    new, out_now, loss, _ = ts_step(params, x_now, pending, n_max, lr, cfg)
-    return new, out_now, loss
+
+    def loss_fn(p):
+        out = network.apply(p, jnp.stack([x_now, pending.x]), cfg)
+        target = jax.lax.stop_gradient(ts_targets(pending, out[0, 0], n_max, cfg.learner))
+        err = target - out[1]
+        return 0.5 * jnp.where(pending.valid, jnp.sum(err**2), 0.0), out[0]
+
+    (loss, out_now), grads = jax.value_and_grad(loss_fn, has_aux=True)(params)
+    tx = optax.sgd(lr)
+    updates, _ = tx.update(grads, tx.init(params), params)
+    return optax.apply_updates(params, updates), out_now, loss

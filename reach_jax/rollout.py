@@ -11,6 +11,7 @@ several hosts (after `jax.distributed.initialize`), only the device list changes
 
 from __future__ import annotations
 
+import contextlib
 import os
 from typing import NamedTuple
 
@@ -42,12 +43,18 @@ def add_cpu_xla_flags() -> None:
 add_cpu_xla_flags()
 
 
+def available_cores() -> int:
+    """CPU cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 def configure_backend(devices: int | None = None, multihost: bool = False) -> None:
     """Set up JAX before its first computation: CPU compiler options, host device count, multi-host.
 
     Args:
       devices: on CPU, the number of host devices to expose (one per core is the useful maximum);
-        None keeps the default (one). Ignored by GPU/TPU backends, whose devices are physical.
+        None asks for one per available core when JAX has not started yet, and otherwise keeps what it has.
+        Ignored by GPU/TPU backends, whose devices are physical.
       multihost: join a multi-process run with `jax.distributed.initialize()`, which reads its coordinator,
         process count and id from the cluster environment (SLURM, Open MPI, Cloud TPU) or from
         JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID.
@@ -55,6 +62,10 @@ def configure_backend(devices: int | None = None, multihost: bool = False) -> No
     add_cpu_xla_flags()
     if devices is not None:
         jax.config.update("jax_num_cpu_devices", devices)
+    else:
+        # Too late once JAX has computed (e.g. when called in-process); the default device then stays.
+        with contextlib.suppress(RuntimeError):
+            jax.config.update("jax_num_cpu_devices", available_cores())
     if multihost:
         jax.distributed.initialize()
 

@@ -373,7 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--devices",
         type=_positive_int,
-        help="CPU only: host devices to shard learners over, one per core at most (default 1)",
+        help="CPU only: host devices to shard learners over, one per core at most (default: one per core)",
     )
     p.add_argument(
         "--multihost",
@@ -429,7 +429,11 @@ def _first_existing(path: Path) -> Path:
 
 def parse(argv=None) -> Invocation:
     """Validate a command line without writing anything; raises UsageError or CheckpointError."""
-    args = build_parser().parse_args(argv)
+    return validate(build_parser().parse_args(argv))
+
+
+def validate(args: argparse.Namespace) -> Invocation:
+    """Check parsed arguments against the config and the file system; writes nothing."""
     overrides = _overrides(args)
     if args.resume is not None:
         if args.out is not None:
@@ -461,7 +465,7 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         # Device count and multi-host must be fixed before JAX's first computation.
         rollout.configure_backend(args.devices, args.multihost)
-        inv = parse(argv)
+        inv = validate(args)
     except (UsageError, checkpoint.CheckpointError) as exc:
         print(f"{prog}: error: {printable(str(exc))}", file=sys.stderr)
         return EXIT_USAGE

@@ -334,6 +334,30 @@ def test_ts_update_matches_oracle(kind, n_max):
         assert ref_tgt[0] == pytest.approx(pend["reward"] - CFG.learner.p_range / n_max)
 
 
+_TS_STEP = jax.jit(lambda p, x, pe, nm, lr: learner.ts_step(p, x, pe, nm, lr, NET_CFG))  # the training hot path
+
+
+@pytest.mark.parametrize("carried", [False, True])
+@pytest.mark.parametrize("kind", ["regular", "goal", "out", "invalid"])
+def test_hand_written_ts_step_equals_autodiff_and_optax(kind, carried):
+    """The fast path (hand-written backprop, carried layer-1 pre-activation) equals flax autodiff + optax SGD."""
+    params = _random_params(11)
+    rng = _rng(12)
+    pend = {k: jnp.asarray(v) for k, v in _pendings(rng, 125)[kind].items()}
+    x_now, lr, n_max = jnp.asarray(rng.uniform(0, 1, 125)), jnp.asarray(0.7), jnp.asarray(30.0)
+    (w1, b1), *_ = network.dense_layers(params)
+    u1 = pend["x"] @ w1 + b1 if carried else None
+    new, out, loss, u1_next = _TS_STEP(params, x_now, learner.Pending(**pend, u1=u1), n_max, lr)
+    want_new, want_out, want_loss = _TS_UPDATE(params, x_now, learner.Pending(**pend), n_max, lr)
+    # Same arithmetic in another order: ~1e2 float64 operations per weight.
+    chex.assert_trees_all_close(new, want_new, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose(np.asarray(out), np.asarray(want_out), rtol=RTOL, atol=ATOL)
+    assert float(loss) == pytest.approx(float(want_loss), rel=RTOL, abs=ATOL)
+    # The carried pre-activation is x(t)'s under the *updated* weights (rank-1 correction of the old one).
+    (w1_new, b1_new), *_ = network.dense_layers(new)
+    np.testing.assert_allclose(np.asarray(u1_next), np.asarray(x_now @ w1_new + b1_new), rtol=RTOL, atol=ATOL)
+
+
 def test_n_max_and_curriculum_match_oracle():
     lam = CFG.learner.lam
     upd = jax.jit(lambda n, k: learner.update_n_max(n, k, jnp.asarray(lam)))
