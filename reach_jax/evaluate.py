@@ -365,7 +365,9 @@ def _circular_mean_deg(v: np.ndarray) -> float | None:
     return _json_float(_deg(m)) if np.linalg.norm(m) > 0 else None
 
 
-def aftereffect(paths: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np.ndarray) -> dict:
+def aftereffect(
+    paths: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np.ndarray, field: np.ndarray
+) -> dict:
     """Direction of the pull in Fig. 4 (b) and (c), and the angle between them.
 
     The pull of a movement in (b) (no-field network, field on) is the hand's displacement from the same
@@ -377,11 +379,15 @@ def aftereffect(paths: dict, starts: np.ndarray, targets: np.ndarray, start_corn
     per-movement angles; `mean_direction_deg` is the direction of each panel's mean unit pull vector.
     For the classic sign test we also give SPEC §9's line measure: the signed largest perpendicular
     deviation from the straight start-target line (+ = left of the direction of travel) in (b) and (c).
+    The field's force on a movement is taken as field @ (target - start): the direction of F = B xdot on a
+    straight movement, whatever its speed profile. A pull "with the force" is within 90 deg of it; the
+    after-effect in (c) should point against it.
 
     Args:
       paths: {"a"|"b"|"c"|"d": (M, T, 2) hand paths [m]} of one network per learning condition.
       starts, targets: (M, 2) [m].
       start_corner: (M,) index into CORNER_NAMES.
+      field: (2, 2) viscous field matrix of the test condition [N s/m].
 
     Returns:
       JSON-ready dict.
@@ -389,6 +395,8 @@ def aftereffect(paths: dict, starts: np.ndarray, targets: np.ndarray, start_corn
     pull_b = pull_vectors(paths["b"], paths["a"])
     pull_c = pull_vectors(paths["c"], paths["d"])
     angle = _angle_between(pull_b, pull_c)
+    force = (targets - starts) @ np.asarray(field).T
+    b_to_force, c_to_force = _angle_between(pull_b, force), _angle_between(pull_c, force)
     dev_b = line_deviation(paths["b"], starts, targets)
     dev_c = line_deviation(paths["c"], starts, targets)
     movements = []
@@ -403,6 +411,9 @@ def aftereffect(paths: dict, starts: np.ndarray, targets: np.ndarray, start_corn
                 "pull_c_deg": _json_float(_deg(pull_c[i])),
                 "pull_c_m": float(np.linalg.norm(pull_c[i])),
                 "angle_deg": _json_float(angle[i]),
+                "field_force_deg": _json_float(_deg(force[i])),
+                "pull_b_to_force_deg": _json_float(b_to_force[i]),
+                "pull_c_to_force_deg": _json_float(c_to_force[i]),
                 "line_deviation_b_m": float(dev_b[i]),
                 "line_deviation_c_m": float(dev_c[i]),
             }
@@ -417,6 +428,10 @@ def aftereffect(paths: dict, starts: np.ndarray, targets: np.ndarray, start_corn
             _angle_between(np.nanmean(_unit(pull_b), axis=0), np.nanmean(_unit(pull_c), axis=0))
         ),
         "fraction_opposite_line_deviation": float(opposite.mean()),
+        "mean_pull_b_to_force_deg": _json_float(np.nanmean(b_to_force)),
+        "mean_pull_c_to_force_deg": _json_float(np.nanmean(c_to_force)),
+        "fraction_b_with_force": float(np.mean(b_to_force < 90.0)),
+        "fraction_c_against_force": float(np.mean(c_to_force > 90.0)),
     }
 
 
@@ -644,7 +659,8 @@ def evaluate_run(data: RunData) -> dict:
             panels[letter] = Episode(*(a[i, j] for a in corners))
     after = None
     if all(k in panels for k in "abcd"):
-        after = aftereffect({k: panels[k].hand for k in "abcd"}, c_starts, c_targets, c_corner)
+        viscous = np.asarray(task.make_condition("viscous", cfg).field)
+        after = aftereffect({k: panels[k].hand for k in "abcd"}, c_starts, c_targets, c_corner, viscous)
         after = {"seed": cfg.eval.figure_seed, **after}
     trials = np.asarray(data.batch.states.trials)
     table = table2(lattice.outcome, lattice.steps, data.learners, cfg)

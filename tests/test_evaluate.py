@@ -226,7 +226,8 @@ def test_aftereffect_pulls_are_displacements_from_the_matched_path():
     line = np.linspace(0, 1, t)[None, :, None] * targets[:, None]
     bump = np.sin(np.linspace(0, np.pi, t))[None, :, None]
     paths = {"a": line, "b": line + 0.02 * bump * [0.0, 1.0], "d": line, "c": line + 0.03 * bump * [1.0, -1.0]}
-    got = evaluate.aftereffect(paths, starts, targets, np.zeros(m, int))
+    curl = np.array([[0.0, -10.0], [10.0, 0.0]])  # pushes a +x movement toward +y
+    got = evaluate.aftereffect(paths, starts, targets, np.zeros(m, int), curl)
     assert len(got["movements"]) == m
     mv = got["movements"][0]
     np.testing.assert_allclose([mv["pull_b_deg"], mv["pull_c_deg"], mv["angle_deg"]], [90.0, -45.0, 135.0], atol=1e-6)
@@ -234,6 +235,12 @@ def test_aftereffect_pulls_are_displacements_from_the_matched_path():
     np.testing.assert_allclose([mv["line_deviation_b_m"], mv["line_deviation_c_m"]], [0.02, -0.03], rtol=1e-6)
     np.testing.assert_allclose(got["mean_angle_deg"], 135.0, atol=1e-6)
     assert got["fraction_opposite_line_deviation"] == 1.0
+    np.testing.assert_allclose(
+        [mv["field_force_deg"], mv["pull_b_to_force_deg"], mv["pull_c_to_force_deg"]], [90, 0, 135]
+    )
+    assert got["fraction_b_with_force"] == 1.0 and got["fraction_c_against_force"] == 1.0
+    against = evaluate.aftereffect(paths, starts, targets, np.zeros(m, int), -curl)
+    assert against["fraction_b_with_force"] == 0.0 and against["fraction_c_against_force"] == 0.0
 
 
 def test_quality_measures_on_known_profiles():
