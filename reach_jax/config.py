@@ -177,9 +177,10 @@ def _check_type(name: str, value, default):
     elif isinstance(default, float):
         ok = isinstance(value, (int, float)) and math.isfinite(value)
     elif isinstance(default, tuple):
+        # Grids and the condition list have free length and a fixed element type; other tuples match the default.
         free_length = name.endswith(("grid", "conditions"))
         ok = isinstance(value, tuple) and (free_length or len(value) == len(default))
-        if ok and name.endswith(("grid", "conditions")):
+        if ok and free_length:
             ok = all(isinstance(v, str if name.endswith("conditions") else (int, float)) for v in value)
         elif ok:
             for i, (v, d) in enumerate(zip(value, default, strict=True)):

@@ -56,7 +56,8 @@ def ts_targets(pending: Pending, p_now: jax.Array, n_max: jax.Array, cfg: Learne
     """Training signal (3,) for the input x(t-1), from eq. 1 (critic) and eq. 2 (actor).
 
     At a trial's end the reinforcement stands in for p(t). Non-terminal critic targets are floored at
-    cfg.critic_floor, so long trials cannot push the critic below the penalty (anti-collapse guard).
+    cfg.critic_floor, above the out penalty, so crossing a joint limit always lowers the value (anti-collapse
+    guard; see README "The critic floor").
     """
     p_next = jnp.where(pending.terminal, pending.reward, p_now)
     critic = p_next - cfg.p_range / n_max
