@@ -18,7 +18,7 @@ import numpy as np
 
 from reach_jax.config import OneLineError
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: sparse layer-1 rows in the pending step, per-step draws keyed by step index
 CHECKPOINT_DIR = "checkpoints"
 CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.jsonl"

@@ -32,14 +32,16 @@ class Pending(NamedTuple):
     terminal: jax.Array  # () bool: the transition ended its trial at the goal or a limit
     reward: jax.Array  # () reinforcement that ended the trial, 0 otherwise
     u1: jax.Array | None = None  # (30,) layer-1 pre-activation of x under the current weights; None: recompute
+    rows: jax.Array | None = None  # (20,) int32 coded rows of x that may be non-zero; None: use every row
 
 
-def empty_pending(n_in: int, n_hidden: int | None = None) -> Pending:
+def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None = None) -> Pending:
     """A Pending that triggers no update.
 
     Args:
       n_in: number of network inputs (125).
       n_hidden: width of the first hidden layer (30); None leaves `u1` unset (recomputed when needed).
+      rows: (20,) int32 support rows to carry (any distinct valid rows: x is 0); None: dense updates.
     """
     return Pending(
         x=jnp.zeros(n_in),
@@ -49,6 +51,7 @@ def empty_pending(n_in: int, n_hidden: int | None = None) -> Pending:
         terminal=jnp.array(False),
         reward=jnp.array(0.0),
         u1=None if n_hidden is None else jnp.zeros(n_hidden),
+        rows=rows,
     )
 
 
@@ -76,16 +79,50 @@ def _squash_slope(y: jax.Array) -> jax.Array:
     return (0.5 + y) * (0.5 - y)
 
 
-def ts_step(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: jax.Array, cfg: Config):
+def _layer1_input_product(x: jax.Array, w1: jax.Array, rows: jax.Array | None, n_visual: int) -> jax.Array:
+    """x @ w1 (30,), reading only the visual rows and the coded `rows` when they are given."""
+    # Per-learner matrix-vector product as multiply-and-reduce: under vmap XLA fuses it into one loop
+    # instead of a batched dot with a tiny matrix per learner.
+    if rows is None:
+        return jnp.sum(x[:, None] * w1, axis=0)
+    total = jnp.sum(x[:n_visual, None] * w1[:n_visual], axis=0)
+    # A chain of adds, not a reduction over the gathered rows: XLA:CPU rounds such a reduction differently
+    # for one learner per device than for several, and sharded runs must equal unsharded ones bit for bit.
+    xs, ws = x[rows], w1[rows]
+    for k in range(rows.shape[0]):
+        total = total + xs[k] * ws[k]
+    return total
+
+
+def _layer1_sgd(w1: jax.Array, x: jax.Array, scaled: jax.Array, rows: jax.Array | None, n_visual: int):
+    """w1 - outer(x, scaled), writing only the visual rows and the coded `rows` when they are given."""
+    if rows is None:
+        return w1 - x[:, None] * scaled
+    w1 = w1.at[:n_visual].add(-x[:n_visual, None] * scaled)
+    return w1.at[rows].add(-x[rows][:, None] * scaled, indices_are_sorted=True, unique_indices=True)
+
+
+def ts_step(
+    params,
+    x_now: jax.Array,
+    pending: Pending,
+    n_max: jax.Array,
+    lr: jax.Array,
+    cfg: Config,
+    rows_now: jax.Array | None = None,
+):
     """Forward x(t), then one TS backprop step on x(t-1) by hand-written SGD; the rollout's hot path.
 
     Args:
       params: network parameters W(t) (flax layout of `network.ActorCritic`).
       x_now: (125,) input x(t).
-      pending: the step t-1; its `u1` (30,), if set, is x(t-1)'s layer-1 pre-activation under W(t).
+      pending: the step t-1; its `u1` (30,), if set, is x(t-1)'s layer-1 pre-activation under W(t),
+        and its `rows`, if set, hold every non-zero coded unit of x(t-1).
       n_max: () N_max [steps].
       lr: () learning rate; 0 freezes the weights exactly.
       cfg: model config.
+      rows_now: optional (20,) int32 rows holding every non-zero coded unit of x(t)
+        (`encoding.coded_support`); the layer-1 products then skip the rows that are 0, about 2/3 of them.
 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss (),
@@ -93,10 +130,9 @@ def ts_step(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: ja
     """
     layers = network.dense_layers(params)
     w1, b1 = layers[0]
-    # Per-learner matrix-vector product as multiply-and-reduce: under vmap XLA fuses it into one loop
-    # instead of a batched dot with a tiny matrix per learner.
-    u1_now = jnp.sum(x_now[:, None] * w1, axis=0) + b1
-    u1_prev = pending.u1 if pending.u1 is not None else jnp.sum(pending.x[:, None] * w1, axis=0) + b1
+    n_visual = cfg.sensor.n_cells**2
+    u1_now = _layer1_input_product(x_now, w1, rows_now, n_visual) + b1
+    u1_prev = pending.u1 if pending.u1 is not None else _layer1_input_product(pending.x, w1, None, n_visual) + b1
     # acts[i] = (input of layer i for x(t), for x(t-1)); the raw input row of x(t) is not needed again.
     # Each row is its own multiply-and-reduce over the leading axis: a stacked (2, n) @ W as one
     # reduction over the middle axis compiled to a far slower kernel on CPU (measured, layer 2 alone
@@ -119,7 +155,10 @@ def ts_step(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: ja
         scaled = step * delta
         if i > 0:
             delta_below = jnp.sum(w * delta, axis=1) * _squash_slope(below)
-        new_layers[i] = (w - below[:, None] * scaled, b - scaled)
+        if i > 0:
+            new_layers[i] = (w - below[:, None] * scaled, b - scaled)
+        else:
+            new_layers[i] = (_layer1_sgd(w, below, scaled, pending.rows, n_visual), b - scaled)
         if i > 0:
             delta = delta_below
     bias_input = 1.0 if cfg.network.use_bias else 0.0

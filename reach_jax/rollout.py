@@ -22,7 +22,7 @@ from flax import struct
 from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from reach_jax import arm, learner, network, task
+from reach_jax import arm, encoding, learner, network, task
 from reach_jax.config import Config, n_inputs
 
 # XLA:CPU hands small reductions to YNNPACK by default; for the per-learner 30x10 and 10x3 products that
@@ -106,7 +106,7 @@ class LearnerState:
     """Everything one learner carries from step to step."""
 
     params: dict  # network parameters
-    key: jax.Array  # PRNG key
+    key: jax.Array  # PRNG key of the learner's per-step draws (`step_uniforms`); fixed for its life
     arm: jax.Array  # (4,) arm state now
     prev_arm: jax.Array  # (4,) arm state one step before (the start state at a trial's first step)
     prev_tau: jax.Array  # (2,) torques one step before [N m] (0 at a trial's first step)
@@ -150,7 +150,9 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
         prev_tau=jnp.zeros(2),
         target=target,
         force=force,
-        pending=learner.empty_pending(n_inputs(cfg), cfg.network.hidden[0]),
+        pending=learner.empty_pending(
+            n_inputs(cfg), cfg.network.hidden[0], encoding.coded_support(start, start, jnp.zeros(2), cfg)
+        ),
         t=jnp.array(0, jnp.int32),
         drifted=jnp.array(False),
         n_max=jnp.asarray(cfg.learner.n_max_init),
@@ -161,9 +163,23 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
     )
 
 
+RNG_BLOCK = 64  # steps whose uniforms are drawn in one call; a speed knob only, the stream does not depend on it
+
+
 def n_uniforms(cfg: Config) -> int:
     """Uniform draws one step consumes: 2 for the exploration noise, then one new trial's TrialDraws."""
     return 2 + 2 + 2 * cfg.task.target_candidates + 2
+
+
+def step_uniforms(key: jax.Array, first_step: jax.Array, n_steps: int, cfg: Config) -> jax.Array:
+    """(n_steps, n_uniforms) draws in [0, 1) of one learner's steps first_step, first_step + 1, ...
+
+    A step's draws depend only on the learner's key and the step's index, so blocks of any size (and
+    chunks of any length) see the same stream.
+    """
+    return jax.vmap(lambda i: jax.random.uniform(jax.random.fold_in(key, i), (n_uniforms(cfg),)))(
+        first_step + jnp.arange(n_steps)
+    )
 
 
 def split_uniforms(u: jax.Array, noise: jax.Array, cfg: Config) -> tuple[jax.Array, task.TrialDraws]:
@@ -174,23 +190,22 @@ def split_uniforms(u: jax.Array, noise: jax.Array, cfg: Config) -> tuple[jax.Arr
     return rnd, draws
 
 
-def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: Config, active=None):
+def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper: Hyper, cfg: Config, active=None):
     """One learning step of one learner; returns (new state, StepInfo).
 
     Args:
       state: the learner.
+      u: (n_uniforms,) this step's draws in [0, 1) (`step_uniforms`).
       cond: its condition.
       hyper: its learning constants.
       cfg: model config.
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
     """
-    # One key split and one batch of uniforms per step: every random call is a separate threefry pass,
-    # which dominated the environment's cost when noise and trial draws each had their own.
-    key, k_step = jax.random.split(state.key)
-    rnd, draws = split_uniforms(jax.random.uniform(k_step, (n_uniforms(cfg),)), hyper.noise, cfg)
+    rnd, draws = split_uniforms(u, hyper.noise, cfg)
     x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
+    rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)
     lr = hyper.lr if active is None else jnp.where(active, hyper.lr, 0.0)
-    params, out, loss, u1 = learner.ts_step(state.params, x, state.pending, state.n_max, lr, cfg)
+    params, out, loss, u1 = learner.ts_step(state.params, x, state.pending, state.n_max, lr, cfg, rows)
 
     tau = network.torque(out[1:], rnd, cfg)
     moved = arm.step(state.arm, tau, cond.field, state.force, cfg.arm)
@@ -211,6 +226,7 @@ def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: C
         terminal=goal | out_of_range,
         reward=jnp.where(goal, lc.reward_goal, 0.0) + jnp.where(out_of_range, lc.reward_out, 0.0),
         u1=u1,
+        rows=rows,
     )
 
     # Continue the trial: the target drifts once the trial runs long.
@@ -251,7 +267,6 @@ def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: C
     )
     new = state.replace(
         params=params,
-        key=key,
         pending=pending,
         n_max=n_max,
         distance=distance,
@@ -266,20 +281,57 @@ def learner_step(state: LearnerState, cond: task.Condition, hyper: Hyper, cfg: C
     return new, info
 
 
-def budgeted_step(state: LearnerState, cond: task.Condition, hyper: Hyper, budget: jax.Array, cfg: Config):
+def budgeted_step(
+    state: LearnerState, u: jax.Array, cond: task.Condition, hyper: Hyper, budget: jax.Array, cfg: Config
+):
     """learner_step, except that a learner which has ended `budget` trials stays frozen.
 
     Args:
-      state, cond, hyper: one learner, as for learner_step.
+      state, u, cond, hyper: one learner, as for learner_step.
       budget: () trials per learner.
       cfg: model config.
     """
     active = state.trials < budget
-    new, info = learner_step(state, cond, hyper, cfg, active=active)
+    new, info = learner_step(state, u, cond, hyper, cfg, active=active)
     # The weights of a frozen learner already stay put (zero step size), so the select skips the
     # largest arrays instead of copying them once more every step.
     rest = jax.tree.map(lambda a, b: jnp.where(active, a, b), new.replace(params=None), state.replace(params=None))
     return rest.replace(params=new.params), info
+
+
+def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False):
+    """lax.scan of `step(state, u) -> (state, info)` over n_steps, drawing the uniforms RNG_BLOCK steps at a time.
+
+    Drawing a block in one vectorised call keeps the random-number loop out of the per-step body, where it
+    cost as many kernel launches as the rest of the step. The stream does not depend on the block size.
+
+    Args:
+      step: one step of one learner, or of a batch when `batched`.
+      state: LearnerState, learner axis first when `batched`.
+      n_steps: steps to take.
+      cfg: model config.
+      batched: state and step carry a leading learner axis.
+
+    Returns:
+      (state after n_steps, info stacked over the steps).
+    """
+
+    def draws(s: LearnerState, n: int) -> jax.Array:
+        if not batched:
+            return step_uniforms(s.key, s.steps, n, cfg)
+        u = jax.vmap(lambda k, first: step_uniforms(k, first, n, cfg))(s.key, s.steps)
+        return jnp.swapaxes(u, 0, 1)
+
+    def block_body(s, _):
+        return jax.lax.scan(step, s, draws(s, RNG_BLOCK))
+
+    n_blocks, rest = divmod(n_steps, RNG_BLOCK)
+    state, info = jax.lax.scan(block_body, state, None, length=n_blocks)
+    info = jax.tree.map(lambda a: a.reshape(n_blocks * RNG_BLOCK, *a.shape[2:]), info)
+    if rest:
+        state, tail = jax.lax.scan(step, state, draws(state, rest))
+        info = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), info, tail)
+    return state, info
 
 
 def learner_mesh(n_learners: int, devices=None) -> Mesh:
@@ -327,16 +379,15 @@ def make_chunk(cfg: Config, n_steps: int, devices=None):
       n_steps: learner steps per call.
       devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
     """
-    batched = jax.vmap(lambda s, c, h, b: budgeted_step(s, c, h, b, cfg)[0], in_axes=(0, 0, 0, None))
+    batched = jax.vmap(lambda s, u, c, h, b: budgeted_step(s, u, c, h, b, cfg)[0], in_axes=(0, 0, 0, 0, None))
 
     def chunk(states, conds, hypers, budget):
         states = states.replace(stats=jax.tree.map(jnp.zeros_like, states.stats))
 
-        def step_body(carry, _):
-            return batched(carry, conds, hypers, budget), None
+        def step_body(carry, u):
+            return batched(carry, u, conds, hypers, budget), None
 
-        states, _ = jax.lax.scan(step_body, states, None, length=n_steps)
-        return states
+        return scan_steps(step_body, states, n_steps, cfg, batched=True)[0]
 
     compiled = {}
 
@@ -373,9 +424,9 @@ def make_trace(cfg: Config, n_steps: int):
     """Compiled run of one learner that also returns the StepInfo of every step (for tests and plots)."""
 
     def trace(state, cond, hyper):
-        def step_body(carry, _):
-            return learner_step(carry, cond, hyper, cfg)
+        def step_body(carry, u):
+            return learner_step(carry, u, cond, hyper, cfg)
 
-        return jax.lax.scan(step_body, state, None, length=n_steps)
+        return scan_steps(step_body, state, n_steps, cfg)
 
     return jax.jit(trace)

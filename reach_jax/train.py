@@ -90,11 +90,10 @@ def make_train(cfg: Config, n_steps: int):
     """Pure `train(key, cond, hyper) -> LearnerState` for one learner; jit(vmap(train)) trains many."""
 
     def train(key, cond, hyper):
-        def step_body(state, _):
-            return rollout.learner_step(state, cond, hyper, cfg)[0], None
+        def step_body(state, u):
+            return rollout.learner_step(state, u, cond, hyper, cfg)[0], None
 
-        state, _ = jax.lax.scan(step_body, rollout.init_learner(key, cond, cfg), None, length=n_steps)
-        return state
+        return rollout.scan_steps(step_body, rollout.init_learner(key, cond, cfg), n_steps, cfg)[0]
 
     return train
 

@@ -127,6 +127,20 @@ def test_trials_end_and_reset_inside_the_scan():
         assert np.any(x[first - 1, n_now + joints :] != x[first, n_now + joints :])
 
 
+def test_draws_do_not_depend_on_how_steps_are_split():
+    # 150 steps = two RNG blocks and a remainder; 70 + 80 splits the blocks elsewhere.
+    cfg = tiny()
+    cond = task.make_condition("random", cfg)
+    state = rollout.init_learner(jax.random.PRNGKey(3), cond, cfg)
+    hyper = rollout.default_hyper(cfg)
+    whole, info = rollout.make_trace(cfg, 150)(state, cond, hyper)
+    half, first = rollout.make_trace(cfg, 70)(state, cond, hyper)
+    split, second = rollout.make_trace(cfg, 80)(half, cond, hyper)
+    chex.assert_trees_all_equal(split, whole)
+    np.testing.assert_array_equal(np.concatenate([first.rnd, second.rnd]), np.asarray(info.rnd))
+    assert 150 > 2 * rollout.RNG_BLOCK and len(np.unique(np.asarray(info.rnd)[:, 0])) == 150
+
+
 def test_frozen_after_budget():
     cfg = tiny(trials=1)
     batch = train.init_batch(cfg)
