@@ -74,7 +74,9 @@ class LearnerConfig:
     lam: float = 0.999  # lambda of eq. 3 (SPEC §11 choice)
     n_max_init: float = 100.0  # N_max[0] [steps] (choice)
     lr: float = 1.0  # SGD learning rate on squared error (SPEC §11 choice)
-    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (SPEC §11 choice)
+    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units while the curriculum grows (SPEC §11 choice)
+    noise_final: float = 0.1  # exploration bound after the anneal (SPEC §5 leaves decay open; choice)
+    noise_anneal_trials: int = 300_000  # linear anneal noise -> noise_final, from the first full-field trial
     critic_floor: float = -0.3  # non-terminal critic targets never go below it, so "out" is always worse (choice)
 
 
@@ -218,7 +220,14 @@ def from_dict(data: dict) -> Config:
     if data:
         raise ValueError(f"{printable(sorted(data)[0])}: unknown field")
     _check_train(sections["train"])
+    _check_learner(sections["learner"])
     return Config(**sections)
+
+
+def _check_learner(learner: LearnerConfig) -> None:
+    for name in ("noise", "noise_final", "noise_anneal_trials"):
+        if not getattr(learner, name) >= 0:
+            raise ValueError(f"learner.{name}: must not be negative")
 
 
 def _check_train(train: TrainConfig) -> None:

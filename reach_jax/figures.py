@@ -145,6 +145,7 @@ LEARNING_CURVES = (
     ("out_rate", "out rate"),
     ("mean_trial_s", "mean trial length [s]"),
     ("distance_m", "curriculum distance [m]"),
+    ("exploration", "exploration bound"),
 )
 
 
@@ -155,7 +156,7 @@ def learning_curves(metrics: list[dict], cfg: Config):
       metrics: rows of metrics.jsonl (keys learner, condition, seed, trials and LEARNING_CURVES fields).
       cfg: model config.
     """
-    fig, axes = plt.subplots(len(LEARNING_CURVES), 1, figsize=(8, 11), sharex=True)
+    fig, axes = plt.subplots(len(LEARNING_CURVES), 1, figsize=(8, 13), sharex=True)
     learners = sorted({(r["learner"], r["condition"], r["seed"]) for r in metrics})
     for ax, (key, label) in zip(axes, LEARNING_CURVES, strict=True):
         for learner, cond, seed in learners:

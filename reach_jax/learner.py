@@ -74,6 +74,20 @@ def update_n_max(n_max: jax.Array, n_steps: jax.Array, lam: jax.Array) -> jax.Ar
     return jnp.where(n_steps > lam * n_max, n_steps.astype(n_max.dtype), lam * n_max)
 
 
+def exploration_bound(noise: jax.Array, trials: jax.Array, full_at: jax.Array, cfg: LearnerConfig) -> jax.Array:
+    """() bound of rnd ~ U(-b, b): `noise` until the curriculum is full, then linear to cfg.noise_final.
+
+    Args:
+      noise: () the learner's starting bound.
+      trials: () trials ended so far.
+      full_at: () trial count when the curriculum first reached its maximum distance; negative before.
+      cfg: learner constants (noise_final, noise_anneal_trials).
+    """
+    done = (trials - full_at) / max(cfg.noise_anneal_trials, 1)
+    frac = jnp.where(full_at < 0, 0.0, jnp.clip(done, 0.0, 1.0))
+    return noise + (cfg.noise_final - noise) * frac
+
+
 def _squash_slope(y: jax.Array) -> jax.Array:
     """f'(u) written through y = f(u): (0.5 + y)(0.5 - y), as in the oracle."""
     return (0.5 + y) * (0.5 - y)

@@ -75,7 +75,7 @@ class Hyper:
     """Per-learner learning constants, so a sweep is just a batch of learners."""
 
     lr: jax.Array  # () SGD learning rate
-    noise: jax.Array  # () exploration bound: rnd ~ U(-noise, noise)
+    noise: jax.Array  # () exploration bound rnd ~ U(-noise, noise) until the anneal (learner.exploration_bound)
     lam: jax.Array  # () lambda of eq. 3
 
 
@@ -117,6 +117,7 @@ class LearnerState:
     drifted: jax.Array  # () bool: the target drifted in this trial
     n_max: jax.Array  # () N_max of eq. 3 [steps]
     distance: jax.Array  # () curriculum distance [m]
+    full_at: jax.Array  # () trials ended when the distance first reached its maximum; -1 before
     trials: jax.Array  # () trials ended since the start of training
     steps: jax.Array  # () steps taken since the start of training
     stats: Stats  # counters since the last chunk boundary
@@ -140,7 +141,7 @@ class StepInfo(NamedTuple):
 def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerState:
     """Fresh learner: new weights, first trial at the initial curriculum distance."""
     k_param, k_trial, k_run = jax.random.split(key, 3)
-    distance = jnp.asarray(task.curriculum_bounds(cfg)[0])
+    distance, full = (jnp.asarray(b) for b in task.curriculum_bounds(cfg))
     start, target, force = task.place_trial(task.draw_trial(k_trial, cfg), distance, cond.force_amplitude, cfg)
     return LearnerState(
         params=network.init_params(k_param, cfg),
@@ -157,6 +158,7 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
         drifted=jnp.array(False),
         n_max=jnp.asarray(cfg.learner.n_max_init),
         distance=distance,
+        full_at=jnp.where(distance >= full, 0, -1).astype(jnp.int32),
         trials=jnp.array(0, jnp.int32),
         steps=jnp.array(0, jnp.int32),
         stats=zero_stats(),
@@ -201,7 +203,8 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
       cfg: model config.
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
     """
-    rnd, draws = split_uniforms(u, hyper.noise, cfg)
+    bound = learner.exploration_bound(hyper.noise, state.trials, state.full_at, cfg.learner)
+    rnd, draws = split_uniforms(u, bound, cfg)
     x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
     rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)
     lr = hyper.lr if active is None else jnp.where(active, hyper.lr, 0.0)
@@ -244,6 +247,8 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
     # Or start a new one, with the curriculum and N_max updated by the trial that ended.
     n_max = jnp.where(goal, learner.update_n_max(state.n_max, t, hyper.lam), state.n_max)
     distance = jnp.where(done, task.update_curriculum(state.distance, goal & ~state.drifted, cfg), state.distance)
+    first_full = (state.full_at < 0) & (distance >= task.curriculum_bounds(cfg)[1])
+    full_at = jnp.where(first_full, state.trials + done, state.full_at)
     start, new_target, force = task.place_trial(draws, distance, cond.force_amplitude, cfg)
     fresh = dict(
         arm=start,
@@ -270,6 +275,7 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
         pending=pending,
         n_max=n_max,
         distance=distance,
+        full_at=full_at,
         trials=state.trials + done,
         steps=state.steps + 1,
         stats=stats,

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import checkpoint, rollout, task
+from reach_jax import checkpoint, learner, rollout, task
 from reach_jax.config import (
     CONDITIONS,
     Config,
@@ -111,6 +111,11 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
     s = jax.device_get(states.stats)
     trials, steps = np.asarray(states.trials), np.asarray(states.steps)
     distance, n_max = np.asarray(states.distance), np.asarray(states.n_max)
+    bound = np.asarray(
+        jax.vmap(lambda n, t, f: learner.exploration_bound(n, t, f, cfg.learner))(
+            jnp.asarray([h[1] for h in learner_hypers(cfg)]), states.trials, states.full_at
+        )
+    )
     rows = []
     for i, ((cond, seed), (lr, noise, lam)) in enumerate(zip(table, learner_hypers(cfg), strict=True)):
         ended = int(s.trials[i])
@@ -139,6 +144,7 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
                 "mean_trial_s": None if mean_steps is None else mean_steps * cfg.arm.dt,
                 "distance_m": float(distance[i]),
                 "n_max": float(n_max[i]),
+                "exploration": float(bound[i]),
                 "wall_s": round(wall, 3),
             }
         )

@@ -79,6 +79,7 @@ def test_learning_curves_draw_one_line_per_learner_in_every_panel():
             "out_rate": 0.0,
             "mean_trial_s": 1.0 + c,
             "distance_m": 0.064 + 0.001 * c,
+            "exploration": 0.2 - 0.05 * c,
         }
         for c in range(3)
         for i, cond in enumerate(("none", "viscous"))

@@ -141,6 +141,31 @@ def test_draws_do_not_depend_on_how_steps_are_split():
     assert 150 > 2 * rollout.RNG_BLOCK and len(np.unique(np.asarray(info.rnd)[:, 0])) == 150
 
 
+def test_exploration_anneals_once_the_curriculum_is_full():
+    lc = LearnerConfig(noise=0.2, noise_final=0.1, noise_anneal_trials=1000)
+    bound = jax.jit(lambda t, f: learner.exploration_bound(jnp.asarray(lc.noise), t, f, lc))
+    assert float(bound(5000, -1)) == pytest.approx(0.2)  # curriculum not full yet: no anneal, however long
+    assert float(bound(100, 100)) == pytest.approx(0.2)
+    assert float(bound(600, 100)) == pytest.approx(0.15)
+    assert float(bound(1100, 100)) == pytest.approx(0.1)
+    assert float(bound(10**6, 100)) == pytest.approx(0.1)
+
+    # In a rollout, full_at records the trial count when the distance first reaches its maximum, once.
+    cfg = tiny()
+    _, hi = task.curriculum_bounds(cfg)
+    cond, hyper = task.make_condition("none", cfg), rollout.default_hyper(cfg)
+    start = rollout.init_learner(jax.random.PRNGKey(0), cond, cfg)
+    assert int(start.full_at) == -1
+    one, many = rollout.make_trace(cfg, 1), rollout.make_trace(cfg, 300)
+    reached = one(start.replace(distance=jnp.asarray(hi), trials=jnp.asarray(7, jnp.int32)), cond, hyper)[0]
+    assert int(reached.full_at) == 7
+    later, info = many(reached, cond, hyper)
+    assert np.any(info.out_of_range | info.cap)  # failures moved the distance down, and full_at stayed
+    assert float(later.distance) < hi and int(later.full_at) == 7
+    full_cfg = dataclasses.replace(cfg, task=dataclasses.replace(cfg.task, curriculum_init_cells=cfg.sensor.n_cells))
+    assert int(rollout.init_learner(jax.random.PRNGKey(0), cond, full_cfg).full_at) == 0
+
+
 def test_frozen_after_budget():
     cfg = tiny(trials=1)
     batch = train.init_batch(cfg)
