@@ -74,9 +74,9 @@ class LearnerConfig:
     lam: float = 0.999  # lambda of eq. 3 (SPEC §11 choice)
     n_max_init: float = 100.0  # N_max[0] [steps] (choice)
     lr: float = 1.0  # SGD learning rate on squared error (SPEC §11 choice)
-    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units while the curriculum grows (SPEC §11 choice)
-    noise_final: float = 0.1  # exploration bound after the anneal (SPEC §5 leaves decay open; choice)
-    noise_anneal_trials: int = 300_000  # linear anneal noise -> noise_final, from the first full-field trial
+    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (SPEC §11 choice)
+    noise_final_ratio: float = 1.0  # bound after the anneal / noise; 1 = no anneal (SPEC §5 leaves decay open)
+    noise_anneal_trials: int = 300_000  # linear anneal to noise * noise_final_ratio, from the first full-field trial
     critic_floor: float = -0.3  # non-terminal critic targets never go below it, so "out" is always worse (choice)
 
 
@@ -225,7 +225,7 @@ def from_dict(data: dict) -> Config:
 
 
 def _check_learner(learner: LearnerConfig) -> None:
-    for name in ("noise", "noise_final", "noise_anneal_trials"):
+    for name in ("noise", "noise_final_ratio", "noise_anneal_trials"):
         if not getattr(learner, name) >= 0:
             raise ValueError(f"learner.{name}: must not be negative")
 

@@ -253,13 +253,18 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
     total = cfg.train.trials * len(table)
     bar = Progress(total, "trials", stream=stream) if progress else None
     started = time.monotonic()
-    while int(jnp.min(batch.states.trials)) < cfg.train.trials:
-        states = run_chunk(batch.states, batch.conds, batch.hypers, budget)
-        batch = batch._replace(states=states)
+
+    def unfinished(states) -> bool:
+        return int(np.min(np.asarray(states.trials))) < cfg.train.trials
+
+    running = run_chunk(batch.states, batch.conds, batch.hypers, budget) if unfinished(batch.states) else None
+    while running is not None:
+        # Every learner on this process (an all-gather across hosts with --multihost), copied to the host.
+        states = jax.device_get(rollout.to_host(running))
         chunk += 1
-        # Every learner on this process (a no-op on one host; an all-gather across hosts with --multihost).
-        states = rollout.to_host(states)
         ok = np.asarray(finite_learners(states))
+        # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk.
+        running = run_chunk(running, batch.conds, batch.hypers, budget) if ok.all() and unfinished(states) else None
         if not ok.all():
             i = int(np.argmin(ok))
             cond, seed = table[i]
@@ -268,10 +273,11 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
                 f"learner {i} (condition {cond}, seed {seed}) became non-finite in chunk {chunk}; "
                 f"last good checkpoint kept: {last}"
             )
+        batch = batch._replace(states=states)
         rows = metrics_rows(states, table, chunk, time.monotonic() - started, cfg)
         if jax.process_index() == 0:  # one writer when several hosts share the run directory
             checkpoint.append_lines(run_dir / checkpoint.METRICS_FILE, [json.dumps(r) for r in rows])
-            write_checkpoint(run_dir, chunk, batch._replace(states=states), cfg)
+            write_checkpoint(run_dir, chunk, batch, cfg)
         if bar:
             bar.update(int(np.minimum(np.asarray(states.trials), cfg.train.trials).sum()), status_line(rows))
     if bar:

@@ -142,7 +142,7 @@ def test_draws_do_not_depend_on_how_steps_are_split():
 
 
 def test_exploration_anneals_once_the_curriculum_is_full():
-    lc = LearnerConfig(noise=0.2, noise_final=0.1, noise_anneal_trials=1000)
+    lc = LearnerConfig(noise=0.2, noise_final_ratio=0.5, noise_anneal_trials=1000)
     bound = jax.jit(lambda t, f: learner.exploration_bound(jnp.asarray(lc.noise), t, f, lc))
     assert float(bound(5000, -1)) == pytest.approx(0.2)  # curriculum not full yet: no anneal, however long
     assert float(bound(100, 100)) == pytest.approx(0.2)
