@@ -168,13 +168,10 @@ def ts_step(
         below = acts[i][1]
         scaled = step * delta
         if i > 0:
-            delta_below = jnp.sum(w * delta, axis=1) * _squash_slope(below)
-        if i > 0:
             new_layers[i] = (w - below[:, None] * scaled, b - scaled)
+            delta = jnp.sum(w * delta, axis=1) * _squash_slope(below)
         else:
             new_layers[i] = (_layer1_sgd(w, below, scaled, pending.rows, n_visual), b - scaled)
-        if i > 0:
-            delta = delta_below
     bias_input = 1.0 if cfg.network.use_bias else 0.0
     u1_next = u1_now - step * delta * (jnp.dot(pending.x, x_now) + bias_input)
     return network.with_dense_layers(params, new_layers), out_now, loss, u1_next
