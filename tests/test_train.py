@@ -165,6 +165,14 @@ def test_exploration_anneals_once_the_curriculum_is_full():
     full_cfg = dataclasses.replace(cfg, task=dataclasses.replace(cfg.task, curriculum_init_cells=cfg.sensor.n_cells))
     assert int(rollout.init_learner(jax.random.PRNGKey(0), cond, full_cfg).full_at) == 0
 
+    # The rollout explores within the annealed bound: full from the start, halved after one trial.
+    annealed = dataclasses.replace(
+        full_cfg, learner=dataclasses.replace(full_cfg.learner, noise_final_ratio=0.5, noise_anneal_trials=1)
+    )
+    start = rollout.init_learner(jax.random.PRNGKey(0), cond, annealed).replace(trials=jnp.asarray(1, jnp.int32))
+    rnd = np.abs(np.asarray(rollout.make_trace(annealed, 200)(start, cond, hyper)[1].rnd))
+    assert rnd.max() <= 0.5 * annealed.learner.noise and rnd.max() > 0.45 * annealed.learner.noise
+
 
 def test_frozen_after_budget():
     cfg = tiny(trials=1)
