@@ -162,8 +162,16 @@ def tuplify(value):
 
 
 def printable(text: str) -> str:
-    """Text with control characters escaped, so an error message stays on one line."""
-    return text.encode("unicode_escape").decode()
+    """Text with unprintable characters (newlines, controls) escaped, so an error message stays on one line.
+
+    Printable text, escapes included, passes unchanged, so applying it twice is harmless.
+    """
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
+
+
+def error_line(prog: str, message: str) -> str:
+    """The one line a command prints for a user error: "prog: error: message", control characters escaped."""
+    return f"{prog}: error: {printable(message)}\n"
 
 
 class OneLineError(ValueError):

@@ -51,7 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from reach_jax import arm, checkpoint, network, sensor, task, train
-from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config
+from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config, error_line
 
 EXIT_USAGE = 2  # missing or corrupt run directory; nothing written
 EXIT_IO = 4  # writing the results failed
@@ -702,7 +702,7 @@ def write_results(run_dir: Path, data: RunData, results: dict) -> Path:
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+        self.exit(EXIT_USAGE, error_line(self.prog, message))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -719,13 +719,13 @@ def main(argv=None) -> int:
     try:
         data = load_run(args.run_dir)
     except checkpoint.CheckpointError as exc:
-        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        sys.stderr.write(error_line(parser.prog, str(exc)))
         return EXIT_USAGE
     results = evaluate_run(data)
     try:
         out = write_results(args.run_dir, data, results)
     except OSError as exc:
-        print(f"{parser.prog}: error: {args.run_dir / EVAL_DIR}: write failed ({exc})", file=sys.stderr)
+        sys.stderr.write(error_line(parser.prog, f"{args.run_dir / EVAL_DIR}: write failed ({exc})"))
         return EXIT_IO
     print(f"evaluation written to {out}", file=sys.stderr)
     return 0

@@ -27,8 +27,8 @@ from reach_jax.config import (
     Config,
     OneLineError,
     TrainConfig,
+    error_line,
     from_dict,
-    printable,
     to_dict,
     to_json,
     tuplify,
@@ -111,11 +111,8 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
     s = jax.device_get(states.stats)
     trials, steps = np.asarray(states.trials), np.asarray(states.steps)
     distance, n_max = np.asarray(states.distance), np.asarray(states.n_max)
-    bound = np.asarray(
-        jax.vmap(lambda n, t, f: learner.exploration_bound(n, t, f, cfg.learner))(
-            jnp.asarray([h[1] for h in learner_hypers(cfg)]), states.trials, states.full_at
-        )
-    )
+    noises = np.array([noise for _, noise, _ in learner_hypers(cfg)])
+    bound = np.asarray(learner.exploration_bound(noises, states.trials, states.full_at, cfg.learner))
     rows = []
     for i, ((cond, seed), (lr, noise, lam)) in enumerate(zip(table, learner_hypers(cfg), strict=True)):
         ended = int(s.trials[i])
@@ -478,15 +475,15 @@ def main(argv=None) -> int:
         rollout.configure_backend(args.devices, args.multihost)
         inv = validate(args)
     except (UsageError, checkpoint.CheckpointError) as exc:
-        print(f"{prog}: error: {printable(str(exc))}", file=sys.stderr)
+        sys.stderr.write(error_line(prog, str(exc)))
         return EXIT_USAGE
     try:
         run(inv.cfg, inv.run_dir, resume=inv.resume, progress=not inv.quiet)
     except NumericsError as exc:
-        print(f"{prog}: error: {printable(str(exc))}", file=sys.stderr)
+        sys.stderr.write(error_line(prog, str(exc)))
         return EXIT_NUMERICS
     except OSError as exc:
-        print(f"{prog}: error: write failed, last good checkpoint kept: {printable(str(exc))}", file=sys.stderr)
+        sys.stderr.write(error_line(prog, f"write failed, last good checkpoint kept: {exc}"))
         return EXIT_IO
     print(f"run written to {inv.run_dir}", file=sys.stderr)
     return 0

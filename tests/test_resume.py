@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from reach_jax import checkpoint, rollout, train
-from reach_jax.config import Config, TrainConfig, from_dict, printable, to_dict
+from reach_jax.config import Config, TrainConfig, error_line, from_dict, printable, to_dict
 
 ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
 
@@ -268,3 +268,19 @@ def test_fuzzed_config_files_parse_or_fail_with_one_line(section, field, value):
     else:
         assert isinstance(cfg, Config)
         assert isinstance(cfg.train, TrainConfig)
+
+
+@settings(max_examples=300, deadline=None)
+@given(text=st.text())
+def test_error_text_stays_on_one_line_and_escaping_is_idempotent(text):
+    once = printable(text)
+    assert len(once.splitlines()) <= 1 and printable(once) == once
+    assert error_line("prog", text).count("\n") == 1
+
+
+@pytest.mark.parametrize("field", ["noise", "noise_final_ratio", "noise_anneal_trials"])
+def test_negative_exploration_settings_are_rejected(field):
+    data = json.loads(json.dumps(to_dict(Config())))
+    data["learner"][field] = -1 if field == "noise_anneal_trials" else -0.5
+    with pytest.raises(ValueError, match=f"learner.{field}: must not be negative"):
+        from_dict(data)
