@@ -129,6 +129,7 @@ class TrainConfig:
     conditions: tuple[str, ...] = CONDITIONS  # learning conditions, Table 2 rows
     seed: int = 0  # master PRNG seed
     chunk_steps: int = 50_000  # learner steps per compiled chunk; checkpoint and log between chunks
+    hidden_pad: int = 8  # compiled loops pad the first hidden layer to a multiple of this with inert units (speed)
     lr_grid: tuple[float, ...] = ()  # sweep: learning rates, crossed with the other grids; () = learner.lr
     noise_grid: tuple[float, ...] = ()  # sweep: exploration bounds; () = learner.noise
     lam_grid: tuple[float, ...] = ()  # sweep: lambdas of eq. 3; () = learner.lam
@@ -239,7 +240,7 @@ def _check_learner(learner: LearnerConfig) -> None:
 
 
 def _check_train(train: TrainConfig) -> None:
-    for name in ("trials", "seeds", "chunk_steps"):
+    for name in ("trials", "seeds", "chunk_steps", "hidden_pad"):
         if getattr(train, name) < 1:
             raise ValueError(f"train.{name}: must be at least 1")
     if train.seed < 0:

@@ -54,13 +54,14 @@ def apply(params, x: jax.Array, cfg: Config) -> jax.Array:
 
 
 def dense_layers(params) -> list[tuple[jax.Array, jax.Array]]:
-    """(kernel (n_in, n_out), bias (n_out,)) per layer from the flax tree; a missing bias reads as zeros."""
+    """(kernel (..., n_in, n_out), bias (..., n_out)) per layer from the flax tree; a missing bias reads as zeros."""
     p = params["params"]
     out = []
     for i in range(len(p)):
         d = p[f"Dense_{i}"]
         kernel = d["kernel"]
-        out.append((kernel, d["bias"] if "bias" in d else jnp.zeros(kernel.shape[1], kernel.dtype)))
+        bias = d["bias"] if "bias" in d else jnp.zeros(kernel.shape[:-2] + kernel.shape[-1:], kernel.dtype)
+        out.append((kernel, bias))
     return out
 
 
@@ -71,6 +72,34 @@ def with_dense_layers(params, layers) -> dict:
         old = params["params"][f"Dense_{i}"]
         new[f"Dense_{i}"] = {"kernel": kernel, **({"bias": bias} if "bias" in old else {})}
     return {**params, "params": new}
+
+
+def pad_hidden(params, multiple: int):
+    """params with the first hidden layer widened to a multiple of `multiple` by units with zero weights in and out.
+
+    The extra units compute f(0) = 0 and pass 0 on; their backprop error is 0 (their outgoing weights are 0),
+    so SGD keeps every added weight exactly 0 and the network computes the same function. Only the first
+    hidden layer is padded: its (125, 30) kernel dominates the step, while padding the 10-unit layer to 16
+    made the step slower (benchmarks/levers.py). Works on batched trees (leading axes), kernels being
+    (..., n_in, n_out) and biases (..., n_out).
+
+    Args:
+      params: flax parameter tree (`dense_layers` layout) of at least two layers.
+      multiple: the first hidden width is rounded up to a multiple of it; 1 leaves it unchanged.
+    """
+    (w1, b1), (w2, b2), *rest = dense_layers(params)
+    grow = -w1.shape[-1] % multiple
+    w1 = jnp.pad(w1, [(0, 0)] * (w1.ndim - 1) + [(0, grow)])
+    b1 = jnp.pad(b1, [(0, 0)] * (b1.ndim - 1) + [(0, grow)])
+    w2 = jnp.pad(w2, [(0, 0)] * (w2.ndim - 2) + [(0, grow), (0, 0)])
+    return with_dense_layers(params, [(w1, b1), (w2, b2), *rest])
+
+
+def unpad_hidden(params, cfg: Config):
+    """Inverse of `pad_hidden`: the first hidden layer cut back to the config's width (exact: the cut weights are 0)."""
+    width = cfg.network.hidden[0]
+    (w1, b1), (w2, b2), *rest = dense_layers(params)
+    return with_dense_layers(params, [(w1[..., :width], b1[..., :width]), (w2[..., :width, :], b2), *rest])
 
 
 def torque(m: jax.Array, rnd: jax.Array, cfg: Config) -> jax.Array:

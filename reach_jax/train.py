@@ -185,7 +185,11 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[Ba
     path = path or ckpts[-1]
     fresh = jax.eval_shape(lambda: init_batch(cfg))
     tree, meta = checkpoint.load(path, {"states": fresh.states, "hypers": fresh.hypers})
-    stored = json.loads(json.dumps(meta.get("config")))
+    try:
+        # Through from_dict, so a field added to the config since the checkpoint reads as its default.
+        stored = json.loads(json.dumps(to_dict(from_dict(meta["config"]))))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise checkpoint.CheckpointError(f"{path}: stored config unreadable ({exc})") from None
     diff = _first_difference(stored, json.loads(json.dumps(to_dict(cfg))))
     if diff:
         raise checkpoint.CheckpointError(f"{path}: field config.{diff} disagrees with {checkpoint.CONFIG_FILE}")

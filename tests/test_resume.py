@@ -78,6 +78,32 @@ def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path):
     assert metrics_without_wall(out) == metrics_without_wall(uninterrupted)
 
 
+def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(uninterrupted, tmp_path):
+    out = tmp_path / "run"
+    for p in uninterrupted.rglob("*"):
+        if p.is_file():
+            (out / p.relative_to(uninterrupted)).parent.mkdir(parents=True, exist_ok=True)
+            (out / p.relative_to(uninterrupted)).write_bytes(p.read_bytes())
+    *_, older, newest = checkpoint.list_checkpoints(out)
+    newest.unlink()
+    # Written before `train.hidden_pad` existed: neither the config file nor the checkpoint names it.
+    data = json.loads((out / checkpoint.CONFIG_FILE).read_text())
+    del data["train"]["hidden_pad"]
+    (out / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
+    with np.load(older) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    meta = json.loads(arrays["__meta__"].tobytes())
+    del meta["config"]["train"]["hidden_pad"]
+    arrays["__meta__"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    np.savez(older, **arrays)
+    assert train.main(["--resume", str(out), "--quiet"]) == 0
+    name, arrays = final_arrays(out)
+    want_name, want = final_arrays(uninterrupted)
+    assert name == want_name
+    for k in want:
+        np.testing.assert_array_equal(arrays[k], want[k], err_msg=k)
+
+
 def test_metrics_past_the_checkpoint_and_torn_lines_are_dropped_on_resume(tmp_path):
     out = tmp_path / "run"
     argv = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "100"]
@@ -125,6 +151,14 @@ def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupt
     data["learner"]["lr"] = 0.123
     (run / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
     cases.append((run, "config.learner.lr"))
+    run, newest = broken_copy("stored_config")
+    with np.load(newest) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(arrays["__meta__"].tobytes())
+    meta["config"]["train"]["bogus"] = 1
+    arrays["__meta__"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    np.savez(newest, **arrays)
+    cases.append((run, "train.bogus"))
     run, _ = broken_copy("flag_disagrees")
     cases.append((run, "train.trials"))
     for run, must_name in cases:

@@ -202,6 +202,42 @@ def test_batched_chunk_matches_pure_single_learner_train():
     assert max(moved) > 0
 
 
+def test_padded_hidden_units_stay_inert_and_change_nothing():
+    cfg = tiny(conditions=("viscous", "random"))
+    batch = train.init_batch(cfg)
+    one = jax.tree.map(lambda a: a[0], batch.states)
+    wide = rollout.widen_hidden(one, cfg)
+    (w1, b1), (w2, _), _ = network.dense_layers(wide.params)
+    assert w1.shape == (n_inputs(cfg), 32) and b1.shape == (32,) and w2.shape == (32, 10)
+    assert wide.pending.u1.shape == (32,)
+    chex.assert_trees_all_equal(rollout.narrow_hidden(wide, cfg), one)
+
+    @jax.jit
+    def learn(state, cond, hyper):
+        def body(s, u):
+            return rollout.learner_step(s, u, cond, hyper, cfg)[0], None
+
+        return jax.lax.scan(body, state, rollout.step_uniforms(state.key, state.steps, 2000, cfg))[0]
+
+    cond, hyper = (jax.tree.map(lambda a: a[0], t) for t in (batch.conds, batch.hypers))
+    learned = learn(wide, cond, hyper)
+    assert int(learned.trials) > 5
+    (w1, b1), (w2, _), _ = network.dense_layers(learned.params)
+    for pad in (w1[:, 30:], b1[30:], w2[30:], learned.pending.u1[30:]):
+        np.testing.assert_array_equal(pad, 0.0)
+    assert float(jnp.abs(w1[:, :30] - network.dense_layers(wide.params)[0][0][:, :30]).max()) > 1e-3
+
+    # The padded layout is a speed choice only: the trainer's results are the same bit for bit.
+    unpadded = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, hidden_pad=1))
+    budget = jnp.array(10**6)
+    runs = [
+        rollout.make_chunk(c, 700)(jax.tree.map(jnp.copy, batch.states), batch.conds, batch.hypers, budget)
+        for c in (cfg, unpadded)
+    ]
+    assert network.dense_layers(runs[0].params)[0][0].shape == (2, n_inputs(cfg), 30)
+    chex.assert_trees_all_equal(*runs)
+
+
 def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
     a_file = tmp_path / "file"
     a_file.write_text("x")
