@@ -7,7 +7,10 @@ Units: learner-steps per second (median of the timed calls of `throughput.time_c
   non-zero (`encoding.coded_support` replaced by None, the dense path of `learner.ts_step`);
 - `draws_per_step`: random draws made one step at a time inside the step body (`rollout.RNG_BLOCK` = 1)
   instead of 64 steps at a time;
-- `one_device`: the learner axis on one device instead of sharded over all of them.
+- `one_device`: the learner axis on one device instead of sharded over all of them;
+- `unpadded_hidden`: the first hidden layer at its 30 units instead of padded to 32 (`train.hidden_pad` = 1);
+- `no_donation`: each chunk writes new state buffers instead of reusing its input's;
+- `short_chunks`: SHORT_CHUNK steps per compiled call instead of ~0.4 s worth, so the host syncs more often.
 The variants are interleaved over `--reps` rounds, so that the machine's drift hits them alike; the JSON
 holds every round and the medians.
 """
@@ -15,6 +18,7 @@ holds every round and the medians.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import statistics
@@ -28,7 +32,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import throughput  # noqa: E402  (the sibling benchmark's timing helpers)
 
 BATCHES = (8, 128)  # the Table-2 batch and a large one
-VARIANTS = ("all_levers", "dense_layer1", "draws_per_step", "one_device")
+VARIANTS = (
+    "all_levers",
+    "dense_layer1",
+    "draws_per_step",
+    "one_device",
+    "unpadded_hidden",
+    "no_donation",
+    "short_chunks",
+)
+SHORT_CHUNK = 1000  # steps per call of the short_chunks variant
 
 
 def parse(argv=None) -> argparse.Namespace:
@@ -45,6 +58,7 @@ def measure(variant: str, n_learners: int, cfg) -> float:
     import jax
 
     support, block, devices = encoding.coded_support, rollout.RNG_BLOCK, jax.devices()
+    n_steps, donate = None, True
     try:
         if variant == "dense_layer1":
             encoding.coded_support = lambda *args, **kwargs: None
@@ -52,7 +66,13 @@ def measure(variant: str, n_learners: int, cfg) -> float:
             rollout.RNG_BLOCK = 1
         elif variant == "one_device":
             devices = devices[:1]
-        return throughput.time_chunk(n_learners, devices, cfg, quick=False)["steps_per_s"]
+        elif variant == "unpadded_hidden":
+            cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, hidden_pad=1))
+        elif variant == "no_donation":
+            donate = False
+        elif variant == "short_chunks":
+            n_steps = SHORT_CHUNK
+        return throughput.time_chunk(n_learners, devices, cfg, False, n_steps, donate)["steps_per_s"]
     finally:
         encoding.coded_support, rollout.RNG_BLOCK = support, block
 

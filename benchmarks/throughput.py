@@ -57,7 +57,7 @@ def batch_of(n_learners: int, cfg):
     return jax.tree.map(lambda a: jnp.copy(a[:n_learners]), train.init_batch(cfg))
 
 
-def time_chunk(n_learners: int, devices, cfg, quick: bool) -> dict:
+def time_chunk(n_learners: int, devices, cfg, quick: bool, n_steps: int | None = None, donate: bool = True) -> dict:
     """Median learner-steps/s and compile time of make_chunk for one batch size on the given devices.
 
     Args:
@@ -65,6 +65,8 @@ def time_chunk(n_learners: int, devices, cfg, quick: bool) -> dict:
       devices: devices to shard over.
       cfg: model config.
       quick: shorter timings.
+      n_steps: steps per timed call; None picks enough for TARGET_SECONDS (the probe's length if quick).
+      donate: make_chunk's buffer donation.
 
     Returns:
       {"steps_per_s": learner-steps/s, "compile_s": s, "steps": steps per call, "devices": devices used}.
@@ -75,7 +77,7 @@ def time_chunk(n_learners: int, devices, cfg, quick: bool) -> dict:
     batch = batch_of(n_learners, cfg)
     budget = jnp.asarray(2**31 - 1, jnp.int32)
     probe = 200
-    chunk = rollout.make_chunk(cfg, probe, devices)
+    chunk = rollout.make_chunk(cfg, probe, devices, donate)
     t0 = time.perf_counter()
     states = jax.block_until_ready(chunk(batch.states, batch.conds, batch.hypers, budget))
     first = time.perf_counter() - t0
@@ -84,10 +86,10 @@ def time_chunk(n_learners: int, devices, cfg, quick: bool) -> dict:
     per_step = (time.perf_counter() - t0) / probe
     compile_s = first - per_step * probe
 
-    n_steps = probe
-    if not quick:  # a longer chunk, so that each timed call lasts TARGET_SECONDS; --quick keeps the probe
-        n_steps = max(probe, int(TARGET_SECONDS / per_step))
-        chunk = rollout.make_chunk(cfg, n_steps, devices)
+    if n_steps is None:  # a chunk long enough that each timed call lasts TARGET_SECONDS; --quick keeps the probe
+        n_steps = probe if quick else max(probe, int(TARGET_SECONDS / per_step))
+    if n_steps != probe:
+        chunk = rollout.make_chunk(cfg, n_steps, devices, donate)
         states = jax.block_until_ready(chunk(states, batch.conds, batch.hypers, budget))  # compile, warm
     times = []
     for _ in range(QUICK_REPS if quick else REPS):
@@ -140,11 +142,11 @@ def schedule_steps(run_dir: Path) -> tuple[float | None, str]:
         needed.append(last["steps"] + left * mean_len)
         notes.append((learner, last["trials"], mean_len))
     done = min(t for _, t, _ in notes)
-    how = (
-        f"{path}: {len(notes)} learners at {done:,}+ trials; "
-        + ("complete" if done >= TABLE2_TRIALS else f"extrapolated to {TABLE2_TRIALS:,} trials with the mean ")
-        + ("" if done >= TABLE2_TRIALS else f"trial length of each learner's last {TAIL_CHUNKS} chunks ")
-        + f"({min(m for *_, m in notes):.1f}-{max(m for *_, m in notes):.1f} steps)"
+    how = f"{path}: {len(notes)} learners at {done:,}+ trials; " + (
+        "complete"
+        if done >= TABLE2_TRIALS
+        else f"extrapolated to {TABLE2_TRIALS:,} trials with the mean trial length of each learner's last "
+        f"{TAIL_CHUNKS} chunks ({min(m for *_, m in notes):.1f}-{max(m for *_, m in notes):.1f} steps)"
     )
     return max(needed), how
 

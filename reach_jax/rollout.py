@@ -395,7 +395,7 @@ def to_host(tree):
     return jax.tree.map(jnp.asarray, multihost_utils.process_allgather(tree, tiled=True))
 
 
-def make_chunk(cfg: Config, n_steps: int, devices=None):
+def make_chunk(cfg: Config, n_steps: int, devices=None, donate: bool = True):
     """Compiled run of n_steps steps for a batch of learners: (states, conds, hypers, budget) -> states.
 
     The learner axis is the leading axis of every argument; `budget` is a () trial count per learner.
@@ -406,6 +406,7 @@ def make_chunk(cfg: Config, n_steps: int, devices=None):
       cfg: model config.
       n_steps: learner steps per call.
       devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
+      donate: reuse the input states' buffers for the output (False only to measure what it gives).
     """
     batched = jax.vmap(lambda s, u, c, h, b: budgeted_step(s, u, c, h, b, cfg)[0], in_axes=(0, 0, 0, 0, None))
 
@@ -417,20 +418,20 @@ def make_chunk(cfg: Config, n_steps: int, devices=None):
 
         return scan_steps(step_body, states, n_steps, cfg, batched=True)[0]
 
-    compiled = {}
+    compiled, donated = {}, (0,) if donate else ()
 
     def run(states, conds, hypers, budget):
         n_learners = jax.tree.leaves(states)[0].shape[0]
         mesh = learner_mesh(n_learners, devices)
         if mesh.size not in compiled:
             if mesh.size == 1:
-                compiled[mesh.size] = (None, jax.jit(chunk, donate_argnums=0))
+                compiled[mesh.size] = (None, jax.jit(chunk, donate_argnums=donated))
             else:
                 spec = PartitionSpec("learners")
                 mapped = jax.shard_map(
                     chunk, mesh=mesh, in_specs=(spec, spec, spec, PartitionSpec()), out_specs=spec, check_vma=False
                 )
-                compiled[mesh.size] = (mesh, jax.jit(mapped, donate_argnums=0))
+                compiled[mesh.size] = (mesh, jax.jit(mapped, donate_argnums=donated))
         mesh, fn = compiled[mesh.size]
         if mesh is not None:
             states, conds, hypers = (_on_mesh(t, mesh) for t in (states, conds, hypers))
