@@ -117,6 +117,7 @@ class EvalConfig:
 
 
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # Table 2 rows
+MAX_HIDDEN_PAD = 128  # largest train.hidden_pad: a TPU vector row of float32; wider only wastes memory
 TEST_CONDITIONS = ("none", "viscous")  # Table 2 columns
 
 
@@ -245,6 +246,8 @@ def _check_train(train: TrainConfig) -> None:
             raise ValueError(f"train.{name}: must be at least 1")
     if train.seed < 0:
         raise ValueError("train.seed: must not be negative")
+    if train.hidden_pad > MAX_HIDDEN_PAD:
+        raise ValueError(f"train.hidden_pad: must be at most {MAX_HIDDEN_PAD}")
     bad = [c for c in train.conditions if c not in CONDITIONS]
     if bad or not train.conditions or len(set(train.conditions)) != len(train.conditions):
         raise ValueError(f"train.conditions: must be distinct names from {', '.join(CONDITIONS)}")

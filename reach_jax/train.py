@@ -24,6 +24,7 @@ import numpy as np
 from reach_jax import checkpoint, learner, rollout, task
 from reach_jax.config import (
     CONDITIONS,
+    MAX_HIDDEN_PAD,
     Config,
     OneLineError,
     TrainConfig,
@@ -296,18 +297,22 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _whole_number(text: str, minimum: int) -> int:
+def _whole_number(text: str, minimum: int, maximum: int = 2**31 - 1) -> int:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value) or value < minimum or value != int(value) or value >= 2**31:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number in [{minimum}, 2**31)")
+    if not math.isfinite(value) or value < minimum or value != int(value) or value > maximum:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number in [{minimum}, {maximum}]")
     return int(value)
 
 
 def _positive_int(text: str) -> int:
     return _whole_number(text, 1)
+
+
+def _hidden_pad(text: str) -> int:
+    return _whole_number(text, 1, MAX_HIDDEN_PAD)
 
 
 def _seed(text: str) -> int:
@@ -368,6 +373,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--conditions", type=_conditions, help=f"comma-separated subset of {','.join(CONDITIONS)}")
     p.add_argument("--seed", type=_seed, help="master PRNG seed (default 0)")
     p.add_argument("--chunk-steps", type=_positive_int, help="learner steps per compiled chunk")
+    p.add_argument(
+        "--hidden-pad",
+        type=_hidden_pad,
+        help="pad the first hidden layer to a multiple of this inside the compiled loop (speed only; 1 = off)",
+    )
     p.add_argument("--lr", type=_grid, help="learning rate, or a comma-separated sweep grid")
     p.add_argument("--noise", type=_grid, help="exploration bound, or a comma-separated sweep grid")
     p.add_argument("--lam", type=_grid, help="lambda of eq. 3, or a comma-separated sweep grid")
@@ -403,6 +413,7 @@ def _overrides(args) -> dict:
         "conditions": "conditions",
         "seed": "seed",
         "chunk_steps": "chunk_steps",
+        "hidden_pad": "hidden_pad",
         "lr": "lr_grid",
         "noise": "noise_grid",
         "lam": "lam_grid",

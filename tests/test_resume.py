@@ -20,7 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from reach_jax import checkpoint, rollout, train
-from reach_jax.config import Config, TrainConfig, error_line, from_dict, printable, to_dict
+from reach_jax.config import MAX_HIDDEN_PAD, Config, TrainConfig, error_line, from_dict, printable, to_dict
 
 ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
 
@@ -224,6 +224,7 @@ FLAGS = [
     "--conditions",
     "--seed",
     "--chunk-steps",
+    "--hidden-pad",
     "--out",
     "--resume",
     "--lr",
@@ -317,4 +318,12 @@ def test_negative_exploration_settings_are_rejected(field):
     data = json.loads(json.dumps(to_dict(Config())))
     data["learner"][field] = -1 if field == "noise_anneal_trials" else -0.5
     with pytest.raises(ValueError, match=f"learner.{field}: must not be negative"):
+        from_dict(data)
+
+
+@pytest.mark.parametrize("pad, message", [(0, "must be at least 1"), (MAX_HIDDEN_PAD + 1, "must be at most")])
+def test_hidden_pad_out_of_range_is_rejected(pad, message):
+    data = json.loads(json.dumps(to_dict(Config())))
+    data["train"]["hidden_pad"] = pad
+    with pytest.raises(ValueError, match=f"train.hidden_pad: {message}"):
         from_dict(data)

@@ -248,6 +248,8 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         ["--trials", "ten"],
         ["--trials", "2.5"],
         ["--seeds", "0"],
+        ["--hidden-pad", "0"],
+        ["--hidden-pad", "1000"],
         ["--conditions", "none,sideways"],
         ["--out", str(a_file)],
         ["--out", str(a_file / "sub")],
