@@ -117,8 +117,8 @@ class EvalConfig:
 
 
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # Table 2 rows
-MAX_HIDDEN_PAD = 128  # largest train.hidden_pad: a TPU vector row of float32; wider only wastes memory
 TEST_CONDITIONS = ("none", "viscous")  # Table 2 columns
+MAX_HIDDEN_PAD = 128  # largest train.hidden_pad: a TPU vector row of float32; wider only wastes memory
 
 
 @dataclass(frozen=True)

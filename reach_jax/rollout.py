@@ -345,7 +345,7 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False):
 def widen_hidden(state: LearnerState, cfg: Config) -> LearnerState:
     """state in the layout of the compiled loops: first hidden layer padded to cfg.train.hidden_pad, u1 with it.
 
-    Rows of a multiple of 8 float32 fill whole vector registers: the step runs ~1.3x faster with 32 hidden
+    Rows of a multiple of 8 float32 fill whole vector registers: the step runs 1.1-1.25x faster with 32 hidden
     units than with 30 (benchmarks/levers.py), and `network.pad_hidden` keeps the added units inert.
     Works with or without a leading learner axis.
     """

@@ -45,6 +45,26 @@ def metrics_without_wall(run_dir: Path) -> list[dict]:
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
 
 
+def copy_run(src: Path, dst: Path) -> Path:
+    """dst holding a byte copy of every file of the run in src."""
+    for p in src.rglob("*"):
+        if p.is_file():
+            target = dst / p.relative_to(src)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(p.read_bytes())
+    return dst
+
+
+def edit_meta(path: Path, edit) -> None:
+    """Rewrite a checkpoint's JSON `__meta__` entry through edit(meta), which changes it in place."""
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(arrays["__meta__"].tobytes())
+    edit(meta)
+    arrays["__meta__"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    np.savez(path, **arrays)
+
+
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("whole") / "run"
@@ -79,23 +99,14 @@ def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path):
 
 
 def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(uninterrupted, tmp_path):
-    out = tmp_path / "run"
-    for p in uninterrupted.rglob("*"):
-        if p.is_file():
-            (out / p.relative_to(uninterrupted)).parent.mkdir(parents=True, exist_ok=True)
-            (out / p.relative_to(uninterrupted)).write_bytes(p.read_bytes())
+    out = copy_run(uninterrupted, tmp_path / "run")
     *_, older, newest = checkpoint.list_checkpoints(out)
     newest.unlink()
     # Written before `train.hidden_pad` existed: neither the config file nor the checkpoint names it.
     data = json.loads((out / checkpoint.CONFIG_FILE).read_text())
     del data["train"]["hidden_pad"]
     (out / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
-    with np.load(older) as npz:
-        arrays = {k: npz[k] for k in npz.files}
-    meta = json.loads(arrays["__meta__"].tobytes())
-    del meta["config"]["train"]["hidden_pad"]
-    arrays["__meta__"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    np.savez(older, **arrays)
+    edit_meta(older, lambda meta: meta["config"]["train"].pop("hidden_pad"))
     assert train.main(["--resume", str(out), "--quiet"]) == 0
     name, arrays = final_arrays(out)
     want_name, want = final_arrays(uninterrupted)
@@ -118,13 +129,7 @@ def test_metrics_past_the_checkpoint_and_torn_lines_are_dropped_on_resume(tmp_pa
 
 def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupted, tmp_path, capsys):
     def broken_copy(name):
-        dst = tmp_path / name
-        dst.mkdir()
-        for p in uninterrupted.rglob("*"):
-            if p.is_file():
-                target = dst / p.relative_to(uninterrupted)
-                target.parent.mkdir(parents=True, exist_ok=True)
-                target.write_bytes(p.read_bytes())
+        dst = copy_run(uninterrupted, tmp_path / name)
         return dst, checkpoint.list_checkpoints(dst)[-1]
 
     run, newest = broken_copy("truncated")
@@ -134,12 +139,7 @@ def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupt
     newest.write_bytes(b"not a checkpoint at all")
     cases.append((run, str(newest)))
     run, newest = broken_copy("version")
-    with np.load(newest) as data:
-        arrays = {k: data[k] for k in data.files}
-    meta = json.loads(arrays["__meta__"].tobytes())
-    meta["format_version"] = checkpoint.FORMAT_VERSION + 1
-    arrays["__meta__"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    np.savez(newest, **arrays)
+    edit_meta(newest, lambda meta: meta.update(format_version=checkpoint.FORMAT_VERSION + 1))
     cases.append((run, "format_version"))
     run, _ = broken_copy("config_version")
     data = json.loads((run / checkpoint.CONFIG_FILE).read_text())
@@ -152,12 +152,7 @@ def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupt
     (run / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
     cases.append((run, "config.learner.lr"))
     run, newest = broken_copy("stored_config")
-    with np.load(newest) as data:
-        arrays = {k: data[k] for k in data.files}
-    meta = json.loads(arrays["__meta__"].tobytes())
-    meta["config"]["train"]["bogus"] = 1
-    arrays["__meta__"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    np.savez(newest, **arrays)
+    edit_meta(newest, lambda meta: meta["config"]["train"].update(bogus=1))
     cases.append((run, "train.bogus"))
     run, _ = broken_copy("flag_disagrees")
     cases.append((run, "train.trials"))
