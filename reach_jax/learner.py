@@ -31,7 +31,7 @@ class Pending(NamedTuple):
     valid: jax.Array  # () bool: False at the first step of a run or after a capped trial
     terminal: jax.Array  # () bool: the transition ended its trial at the goal or a limit
     reward: jax.Array  # () reinforcement that ended the trial, 0 otherwise
-    u1: jax.Array | None = None  # (30,) layer-1 pre-activation of x under the current weights; None: recompute
+    u1: jax.Array | None = None  # (hidden,) layer-1 pre-activation of x under the current weights; None: recompute
     rows: jax.Array | None = None  # (20,) int32 coded rows of x that may be non-zero; None: use every row
 
 
@@ -130,7 +130,7 @@ def ts_step(
     Args:
       params: network parameters W(t) (flax layout of `network.ActorCritic`).
       x_now: (125,) input x(t).
-      pending: the step t-1; its `u1` (30,), if set, is x(t-1)'s layer-1 pre-activation under W(t),
+      pending: the step t-1; its `u1` (hidden,), if set, is x(t-1)'s layer-1 pre-activation under W(t),
         and its `rows`, if set, hold every non-zero coded unit of x(t-1).
       n_max: () N_max [steps].
       lr: () learning rate; 0 freezes the weights exactly.
@@ -140,7 +140,8 @@ def ts_step(
 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss (),
-      (30,) layer-1 pre-activation of x(t) under W(t+1), to carry as the next Pending.u1).
+      (hidden,) layer-1 pre-activation of x(t) under W(t+1), to carry as the next Pending.u1; hidden is 30,
+      or 32 inside the compiled loops (`rollout.widen_hidden`)).
     """
     layers = network.dense_layers(params)
     w1, b1 = layers[0]

@@ -80,8 +80,8 @@ def pad_hidden(params, multiple: int):
     The extra units compute f(0) = 0 and pass 0 on; their backprop error is 0 (their outgoing weights are 0),
     so SGD keeps every added weight exactly 0 and the network computes the same function. Only the first
     hidden layer is padded: its (125, 30) kernel dominates the step, while padding the 10-unit layer to 16
-    made the step slower (benchmarks/levers.py). Works on batched trees (leading axes), kernels being
-    (..., n_in, n_out) and biases (..., n_out).
+    as well made the step slower (a development measurement, README "Performance"). Works on batched trees
+    (leading axes), kernels being (..., n_in, n_out) and biases (..., n_out).
 
     Args:
       params: flax parameter tree (`dense_layers` layout) of at least two layers.
