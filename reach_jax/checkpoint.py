@@ -71,8 +71,12 @@ def checkpoint_path(run_dir: Path, chunk: int) -> Path:
     return Path(run_dir) / CHECKPOINT_DIR / f"chunk_{chunk:07d}.npz"
 
 
-def save(run_dir: Path, chunk: int, tree, meta: dict) -> Path:
-    """Atomically write `tree` as the checkpoint after `chunk` chunks; prune old ones."""
+def save(run_dir: Path, chunk: int, tree, meta: dict, keep_every: int = 0) -> Path:
+    """Atomically write `tree` as the checkpoint after `chunk` chunks; prune old ones.
+
+    The newest KEEP checkpoints stay, and with keep_every > 0 so does every checkpoint whose chunk is a
+    multiple of keep_every (snapshots for looking back at a run).
+    """
     folder = Path(run_dir) / CHECKPOINT_DIR
     folder.mkdir(parents=True, exist_ok=True)
     arrays = _flatten(tree)
@@ -84,8 +88,14 @@ def save(run_dir: Path, chunk: int, tree, meta: dict) -> Path:
     path = checkpoint_path(run_dir, chunk)
     atomic_write_bytes(path, buf.getvalue())
     for old in list_checkpoints(run_dir)[:-KEEP]:
-        old.unlink()
+        if not (keep_every and checkpoint_chunk(old) % keep_every == 0):
+            old.unlink()
     return path
+
+
+def checkpoint_chunk(path: Path) -> int:
+    """Chunk index in a checkpoint's file name."""
+    return int(Path(path).stem.removeprefix("chunk_"))
 
 
 def list_checkpoints(run_dir: Path) -> list[Path]:

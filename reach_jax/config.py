@@ -92,6 +92,8 @@ class TaskConfig:
     drift_after: float = 1.0  # target starts drifting after this long in a trial [s] (SPEC §11 choice)
     drift_per_step: float = 0.002  # drift toward the hand [m/step] (SPEC §11 choice)
     max_trial_time: float = 10.0  # safety cap on a learning trial [s] (SPEC §5 choice)
+    drift_neutral_when_full: bool = True  # once the field was first full, a drift-aided success leaves the
+    # curriculum unchanged instead of shrinking it (choice; README "The curriculum")
 
 
 @dataclass(frozen=True)
@@ -134,6 +136,8 @@ class TrainConfig:
     lr_grid: tuple[float, ...] = ()  # sweep: learning rates, crossed with the other grids; () = learner.lr
     noise_grid: tuple[float, ...] = ()  # sweep: exploration bounds; () = learner.noise
     lam_grid: tuple[float, ...] = ()  # sweep: lambdas of eq. 3; () = learner.lam
+    noise_final_ratio_grid: tuple[float, ...] = ()  # sweep: anneal ratios; () = learner.noise_final_ratio
+    keep_every: int = 0  # also keep the checkpoint of every keep_every-th chunk (snapshots); 0 = newest two only
 
 
 @dataclass(frozen=True)
@@ -244,14 +248,15 @@ def _check_train(train: TrainConfig) -> None:
     for name in ("trials", "seeds", "chunk_steps", "hidden_pad"):
         if getattr(train, name) < 1:
             raise ValueError(f"train.{name}: must be at least 1")
-    if train.seed < 0:
-        raise ValueError("train.seed: must not be negative")
+    for name in ("seed", "keep_every"):
+        if getattr(train, name) < 0:
+            raise ValueError(f"train.{name}: must not be negative")
     if train.hidden_pad > MAX_HIDDEN_PAD:
         raise ValueError(f"train.hidden_pad: must be at most {MAX_HIDDEN_PAD}")
     bad = [c for c in train.conditions if c not in CONDITIONS]
     if bad or not train.conditions or len(set(train.conditions)) != len(train.conditions):
         raise ValueError(f"train.conditions: must be distinct names from {', '.join(CONDITIONS)}")
-    for name in ("lr_grid", "noise_grid", "lam_grid"):
+    for name in ("lr_grid", "noise_grid", "lam_grid", "noise_final_ratio_grid"):
         if not all(math.isfinite(v) and v > 0 for v in getattr(train, name)):
             raise ValueError(f"train.{name}: must hold positive numbers")
 

@@ -667,7 +667,7 @@ def evaluate_run(data: RunData) -> dict:
     # A sweep has several networks per (condition, seed); their hyperparameters tell them apart.
     hypers = jax.device_get(data.batch.hypers)
     for row in table["per_network"]:
-        row.update({name: float(getattr(hypers, name)[row["learner"]]) for name in ("lr", "noise", "lam")})
+        row.update({name: float(getattr(hypers, name)[row["learner"]]) for name in train.HYPER_GRIDS})
     return {
         "table2": {
             **table,

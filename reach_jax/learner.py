@@ -74,18 +74,21 @@ def update_n_max(n_max: jax.Array, n_steps: jax.Array, lam: jax.Array) -> jax.Ar
     return jnp.where(n_steps > lam * n_max, n_steps.astype(n_max.dtype), lam * n_max)
 
 
-def exploration_bound(noise: jax.Array, trials: jax.Array, full_at: jax.Array, cfg: LearnerConfig) -> jax.Array:
-    """() bound b of rnd ~ U(-b, b): `noise` until the curriculum is full, then linear to noise * final ratio.
+def exploration_bound(
+    noise: jax.Array, final_ratio: jax.Array, trials: jax.Array, full_at: jax.Array, cfg: LearnerConfig
+) -> jax.Array:
+    """() bound b of rnd ~ U(-b, b): `noise` until the curriculum is full, then linear to noise * final_ratio.
 
     Args:
       noise: () the learner's starting bound.
+      final_ratio: () the learner's bound after the anneal, as a fraction of `noise` (1: no anneal).
       trials: () trials ended so far.
       full_at: () trial count when the curriculum first reached its maximum distance; negative before.
-      cfg: learner constants (noise_final_ratio, noise_anneal_trials).
+      cfg: learner constants (noise_anneal_trials).
     """
     done = (trials - full_at) / max(cfg.noise_anneal_trials, 1)
     frac = jnp.where(full_at < 0, 0.0, jnp.clip(done, 0.0, 1.0))
-    return noise * (1.0 + (cfg.noise_final_ratio - 1.0) * frac)
+    return noise * (1.0 + (final_ratio - 1.0) * frac)
 
 
 def _squash_slope(y: jax.Array) -> jax.Array:

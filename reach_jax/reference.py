@@ -592,15 +592,21 @@ def drift_target(target, hand, step_in_trial: int, cfg: Config):
     return target + gap * (cfg.task.drift_per_step / dist), True
 
 
-def update_curriculum(distance: float, clean_success: bool, cfg: Config) -> float:
-    """Staircase: +step after a success without drift, -step otherwise, kept in bounds.
+def update_curriculum(distance: float, goal: bool, drifted: bool, was_full: bool, cfg: Config) -> float:
+    """Staircase: +step after a success without drift, 0 after a drift-aided success once the curriculum
+    has been full (if cfg.task.drift_neutral_when_full), -step otherwise; kept in bounds.
 
-    Args: distance () [m].
+    Args: distance () [m], goal, drifted, was_full.
     Returns: () [m].
     """
     lo, hi = curriculum_bounds(cfg)
-    d = distance + (cfg.task.curriculum_step if clean_success else -cfg.task.curriculum_step)
-    return min(hi, max(lo, d))
+    if goal and not drifted:
+        step = cfg.task.curriculum_step
+    elif goal and was_full and cfg.task.drift_neutral_when_full:
+        step = 0.0
+    else:
+        step = -cfg.task.curriculum_step
+    return min(hi, max(lo, distance + step))
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -623,6 +629,7 @@ class Learner:
     drifted: bool  # the target drifted in this trial
     n_max: float  # N_max [steps]
     distance: float  # curriculum distance [m]
+    was_full: bool = False  # the distance has reached the whole field
     trials: int = 0  # trials ended
     steps: int = 0  # steps taken
 
@@ -666,6 +673,7 @@ def learner_from_jax(state) -> Learner:
         drifted=bool(state.drifted),
         n_max=float(state.n_max),
         distance=float(state.distance),
+        was_full=bool(state.full_at >= 0),
         trials=int(state.trials),
         steps=int(state.steps),
     )
@@ -697,7 +705,8 @@ def learner_step(lrn: Learner, cond: Condition, lr: float, lam: float, rnd, draw
     if goal:
         new.n_max = update_n_max(lrn.n_max, t, lam)
     if done:
-        new.distance = update_curriculum(lrn.distance, goal and not lrn.drifted, cfg)
+        new.distance = update_curriculum(lrn.distance, goal, lrn.drifted, lrn.was_full, cfg)
+        new.was_full = lrn.was_full or new.distance >= curriculum_bounds(cfg)[1]
         start, target, force = place_trial(draws, new.distance, cond.force_amplitude, cfg)
         new.arm, new.prev_arm, new.prev_tau = start, start.copy(), np.zeros(2)
         new.target, new.force, new.t, new.drifted = target, force, 0, False
@@ -739,6 +748,7 @@ def init_learner(rng: np.random.Generator, cond: Condition, cfg: Config) -> Lear
         drifted=False,
         n_max=cfg.learner.n_max_init,
         distance=distance,
+        was_full=distance >= curriculum_bounds(cfg)[1],
     )
 
 

@@ -77,12 +77,18 @@ class Hyper:
     lr: jax.Array  # () SGD learning rate
     noise: jax.Array  # () exploration bound rnd ~ U(-noise, noise) until the anneal (learner.exploration_bound)
     lam: jax.Array  # () lambda of eq. 3
+    noise_final_ratio: jax.Array  # () bound after the anneal as a fraction of `noise`; 1 = no anneal
 
 
 def default_hyper(cfg: Config) -> Hyper:
     """Hyper from the config's learner defaults."""
     c = cfg.learner
-    return Hyper(lr=jnp.asarray(c.lr), noise=jnp.asarray(c.noise), lam=jnp.asarray(c.lam))
+    return Hyper(
+        lr=jnp.asarray(c.lr),
+        noise=jnp.asarray(c.noise),
+        lam=jnp.asarray(c.lam),
+        noise_final_ratio=jnp.asarray(c.noise_final_ratio),
+    )
 
 
 class Stats(NamedTuple):
@@ -203,7 +209,7 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
       cfg: model config.
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
     """
-    bound = learner.exploration_bound(hyper.noise, state.trials, state.full_at, cfg.learner)
+    bound = learner.exploration_bound(hyper.noise, hyper.noise_final_ratio, state.trials, state.full_at, cfg.learner)
     rnd, draws = split_uniforms(u, bound, cfg)
     x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
     rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)
@@ -246,8 +252,11 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
 
     # Or start a new one, with the curriculum and N_max updated by the trial that ended.
     n_max = jnp.where(goal, learner.update_n_max(state.n_max, t, hyper.lam), state.n_max)
-    distance = jnp.where(done, task.update_curriculum(state.distance, goal & ~state.drifted, cfg), state.distance)
-    first_full = (state.full_at < 0) & (distance >= task.curriculum_bounds(cfg)[1])
+    was_full = state.full_at >= 0
+    distance = jnp.where(
+        done, task.update_curriculum(state.distance, goal, state.drifted, was_full, cfg), state.distance
+    )
+    first_full = ~was_full & (distance >= task.curriculum_bounds(cfg)[1])
     full_at = jnp.where(first_full, state.trials + done, state.full_at)
     start, new_target, force = task.place_trial(draws, distance, cond.force_amplitude, cfg)
     fresh = dict(

@@ -127,10 +127,25 @@ def curriculum_bounds(cfg: Config) -> tuple[float, float]:
     return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
 
 
-def update_curriculum(distance: jax.Array, clean_success: jax.Array, cfg: Config) -> jax.Array:
-    """Staircase: grow after a success without drift, shrink after anything else."""
+def update_curriculum(
+    distance: jax.Array, goal: jax.Array, drifted: jax.Array, was_full: jax.Array, cfg: Config
+) -> jax.Array:
+    """Staircase after a trial: grow after a success without drift, shrink after an out or a cap.
+
+    A drift-aided success also shrinks it, except once the curriculum has been full and
+    cfg.task.drift_neutral_when_full is set: then it leaves the distance unchanged. A learner that needs the
+    drift for some trials (a strong random force, little exploration noise) keeps the whole field.
+
+    Args:
+      distance: () curriculum distance [m].
+      goal: () bool, the trial reached the goal.
+      drifted: () bool, the target drifted during the trial.
+      was_full: () bool, the distance has reached the whole field at some earlier trial.
+      cfg: model config.
+    """
     lo, hi = curriculum_bounds(cfg)
-    step = jnp.where(clean_success, cfg.task.curriculum_step, -cfg.task.curriculum_step)
+    neutral = goal & drifted & was_full & cfg.task.drift_neutral_when_full
+    step = jnp.where(goal & ~drifted, cfg.task.curriculum_step, jnp.where(neutral, 0.0, -cfg.task.curriculum_step))
     return jnp.clip(distance + step, lo, hi)
 
 

@@ -53,20 +53,24 @@ class NumericsError(RuntimeError):
     """A learner's parameters or state stopped being finite."""
 
 
-def hyper_grid(cfg: Config) -> list[tuple[float, float, float]]:
-    """(lr, noise, lam) combinations of a sweep; one combination, the learner defaults, otherwise."""
-    t, lc = cfg.train, cfg.learner
-    return list(itertools.product(t.lr_grid or (lc.lr,), t.noise_grid or (lc.noise,), t.lam_grid or (lc.lam,)))
+# rollout.Hyper field -> the TrainConfig grid that sweeps it (its default is the LearnerConfig field of that name).
+HYPER_GRIDS = {"lr": "lr_grid", "noise": "noise_grid", "lam": "lam_grid", "noise_final_ratio": "noise_final_ratio_grid"}
 
 
-def learner_hypers(cfg: Config) -> list[tuple[float, float, float]]:
-    """(lr, noise, lam) of every learner, aligned with learner_table."""
+def hyper_grid(cfg: Config) -> list[dict[str, float]]:
+    """Hyperparameter combinations of a sweep, keyed like rollout.Hyper; the learner defaults when nothing is swept."""
+    axes = [getattr(cfg.train, grid) or (getattr(cfg.learner, name),) for name, grid in HYPER_GRIDS.items()]
+    return [dict(zip(HYPER_GRIDS, combo, strict=True)) for combo in itertools.product(*axes)]
+
+
+def learner_hypers(cfg: Config) -> list[dict[str, float]]:
+    """Hyperparameters of every learner, aligned with learner_table."""
     return [h for _ in cfg.train.conditions for h in hyper_grid(cfg) for _ in range(cfg.train.seeds)]
 
 
 def learner_table(train: TrainConfig) -> list[tuple[str, int]]:
     """(condition, seed index) of every learner, in batch order: condition, then sweep point, then seed."""
-    n_grid = max(len(train.lr_grid), 1) * max(len(train.noise_grid), 1) * max(len(train.lam_grid), 1)
+    n_grid = math.prod(max(len(getattr(train, grid)), 1) for grid in HYPER_GRIDS.values())
     return [(c, s) for c in train.conditions for _ in range(n_grid) for s in range(train.seeds)]
 
 
@@ -81,8 +85,7 @@ def init_batch(cfg: Config) -> Batch:
     conds = task.stack_conditions([c for c, _ in table], cfg)
     keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
     states = jax.vmap(lambda k, c: rollout.init_learner(k, c, cfg))(keys, conds)
-    lr, noise, lam = (jnp.asarray(v) for v in zip(*learner_hypers(cfg), strict=True))
-    hypers = rollout.Hyper(lr=lr, noise=noise, lam=lam)
+    hypers = rollout.Hyper(**{name: jnp.asarray([h[name] for h in learner_hypers(cfg)]) for name in HYPER_GRIDS})
     # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
     return Batch(*jax.tree.map(jnp.copy, (states, conds, hypers)))
 
@@ -112,10 +115,11 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
     s = jax.device_get(states.stats)
     trials, steps = np.asarray(states.trials), np.asarray(states.steps)
     distance, n_max = np.asarray(states.distance), np.asarray(states.n_max)
-    noises = np.array([noise for _, noise, _ in learner_hypers(cfg)])
-    bound = np.asarray(learner.exploration_bound(noises, states.trials, states.full_at, cfg.learner))
+    hypers = learner_hypers(cfg)
+    noises, ratios = (np.array([h[name] for h in hypers]) for name in ("noise", "noise_final_ratio"))
+    bound = np.asarray(learner.exploration_bound(noises, ratios, states.trials, states.full_at, cfg.learner))
     rows = []
-    for i, ((cond, seed), (lr, noise, lam)) in enumerate(zip(table, learner_hypers(cfg), strict=True)):
+    for i, ((cond, seed), hyper) in enumerate(zip(table, hypers, strict=True)):
         ended = int(s.trials[i])
 
         def per(counter, i=i, ended=ended):
@@ -128,9 +132,7 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
                 "learner": i,
                 "condition": cond,
                 "seed": seed,
-                "lr": lr,
-                "noise": noise,
-                "lam": lam,
+                **hyper,
                 "trials": int(trials[i]),
                 "steps": int(steps[i]),
                 "chunk_trials": ended,
@@ -175,7 +177,8 @@ def _first_difference(a, b, prefix: str = "") -> str | None:
 
 def write_checkpoint(run_dir: Path, chunk: int, batch: Batch, cfg: Config) -> Path:
     """Save the learner states and hyperparameters after `chunk` chunks."""
-    return checkpoint.save(run_dir, chunk, {"states": batch.states, "hypers": batch.hypers}, checkpoint_meta(cfg))
+    tree = {"states": batch.states, "hypers": batch.hypers}
+    return checkpoint.save(run_dir, chunk, tree, checkpoint_meta(cfg), cfg.train.keep_every)
 
 
 def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[Batch, int]:
@@ -315,7 +318,7 @@ def _hidden_pad(text: str) -> int:
     return _whole_number(text, 1, MAX_HIDDEN_PAD)
 
 
-def _seed(text: str) -> int:
+def _non_negative_int(text: str) -> int:
     return _whole_number(text, 0)
 
 
@@ -371,7 +374,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trials", type=_positive_int, help="trials per learner (2e6 in the paper)")
     p.add_argument("--seeds", type=_positive_int, help="networks per condition (2 in the paper)")
     p.add_argument("--conditions", type=_conditions, help=f"comma-separated subset of {','.join(CONDITIONS)}")
-    p.add_argument("--seed", type=_seed, help="master PRNG seed (default 0)")
+    p.add_argument("--seed", type=_non_negative_int, help="master PRNG seed (default 0)")
     p.add_argument("--chunk-steps", type=_positive_int, help="learner steps per compiled chunk")
     p.add_argument(
         "--hidden-pad",
@@ -381,6 +384,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lr", type=_grid, help="learning rate, or a comma-separated sweep grid")
     p.add_argument("--noise", type=_grid, help="exploration bound, or a comma-separated sweep grid")
     p.add_argument("--lam", type=_grid, help="lambda of eq. 3, or a comma-separated sweep grid")
+    p.add_argument(
+        "--noise-final-ratio",
+        type=_grid,
+        help="exploration bound after the anneal as a fraction of --noise (1 = no anneal), or a sweep grid",
+    )
+    p.add_argument(
+        "--keep-every",
+        type=_non_negative_int,
+        metavar="CHUNKS",
+        help="also keep every CHUNKS-th checkpoint as a snapshot (default 0: only the newest two)",
+    )
     p.add_argument(
         "--set",
         type=_setting,
@@ -417,6 +431,8 @@ def _overrides(args) -> dict:
         "lr": "lr_grid",
         "noise": "noise_grid",
         "lam": "lam_grid",
+        "noise_final_ratio": "noise_final_ratio_grid",
+        "keep_every": "keep_every",
     }
     return {field: getattr(args, arg) for arg, field in names.items() if getattr(args, arg) is not None}
 

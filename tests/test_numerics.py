@@ -8,6 +8,7 @@ rule shows up at 1e-6 or more, far above every tolerance used here.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import chex
 import jax
@@ -412,12 +413,12 @@ def test_n_max_and_curriculum_match_oracle():
     for n_max, n_steps in [(100.0, 150), (100.0, 99), (100.0, 100), (10.0, 3)]:
         got = float(upd(jnp.asarray(n_max), jnp.asarray(n_steps, jnp.int32)))
         assert got == pytest.approx(reference.update_n_max(n_max, n_steps, lam), rel=1e-15)
-    cur = jax.jit(lambda d, s: task.update_curriculum(d, s, CFG))
+    cur = jax.jit(lambda d, *flags: task.update_curriculum(d, *flags, CFG))
     lo, hi = reference.curriculum_bounds(CFG)
     for d in (lo, 0.5 * (lo + hi), hi):
-        for ok in (True, False):
-            assert float(cur(jnp.asarray(d), jnp.asarray(ok))) == pytest.approx(
-                reference.update_curriculum(d, ok, CFG), abs=1e-15
+        for flags in itertools.product((True, False), repeat=3):
+            assert float(cur(jnp.asarray(d), *map(jnp.asarray, flags))) == pytest.approx(
+                reference.update_curriculum(d, *flags, CFG), abs=1e-15
             )
 
 

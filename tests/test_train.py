@@ -68,11 +68,20 @@ def test_n_max_follows_eq_3():
 def test_curriculum_staircase_moves_and_stays_in_bounds():
     lo, hi = task.curriculum_bounds(CFG)
     step = CFG.task.curriculum_step
-    d = jnp.array(0.1)
-    assert float(task.update_curriculum(d, jnp.array(True), CFG)) == pytest.approx(0.1 + step)
-    assert float(task.update_curriculum(d, jnp.array(False), CFG)) == pytest.approx(0.1 - step)
-    assert float(task.update_curriculum(jnp.array(lo), jnp.array(False), CFG)) == pytest.approx(lo)
-    assert float(task.update_curriculum(jnp.array(hi), jnp.array(True), CFG)) == pytest.approx(hi)
+    yes, no = jnp.array(True), jnp.array(False)
+
+    def cur(d, goal, drifted=no, was_full=no, cfg=CFG):
+        return float(task.update_curriculum(jnp.asarray(d), goal, drifted, was_full, cfg))
+
+    assert cur(0.1, yes) == pytest.approx(0.1 + step)
+    assert cur(0.1, no) == pytest.approx(0.1 - step)
+    assert cur(0.1, yes, drifted=yes) == pytest.approx(0.1 - step)  # drift-aided, field never full: shrinks
+    assert cur(0.1, yes, drifted=yes, was_full=yes) == pytest.approx(0.1)  # once full: neutral
+    assert cur(0.1, no, drifted=yes, was_full=yes) == pytest.approx(0.1 - step)  # an out or cap still shrinks
+    counting = dataclasses.replace(CFG, task=dataclasses.replace(CFG.task, drift_neutral_when_full=False))
+    assert cur(0.1, yes, drifted=yes, was_full=yes, cfg=counting) == pytest.approx(0.1 - step)
+    assert cur(lo, no) == pytest.approx(lo)
+    assert cur(hi, yes) == pytest.approx(hi)
 
 
 def test_new_trials_start_in_field_at_rest_with_untouched_target_in_the_box():
@@ -143,7 +152,8 @@ def test_draws_do_not_depend_on_how_steps_are_split():
 
 def test_exploration_anneals_once_the_curriculum_is_full():
     lc = LearnerConfig(noise=0.2, noise_final_ratio=0.5, noise_anneal_trials=1000)
-    bound = jax.jit(lambda t, f: learner.exploration_bound(jnp.asarray(lc.noise), t, f, lc))
+    ratio = jnp.asarray(lc.noise_final_ratio)
+    bound = jax.jit(lambda t, f: learner.exploration_bound(jnp.asarray(lc.noise), ratio, t, f, lc))
     assert float(bound(5000, -1)) == pytest.approx(0.2)  # curriculum not full yet: no anneal, however long
     assert float(bound(100, 100)) == pytest.approx(0.2)
     assert float(bound(600, 100)) == pytest.approx(0.15)
@@ -170,6 +180,7 @@ def test_exploration_anneals_once_the_curriculum_is_full():
         full_cfg, learner=dataclasses.replace(full_cfg.learner, noise_final_ratio=0.5, noise_anneal_trials=1)
     )
     start = rollout.init_learner(jax.random.PRNGKey(0), cond, annealed).replace(trials=jnp.asarray(1, jnp.int32))
+    hyper = rollout.default_hyper(annealed)
     rnd = np.abs(np.asarray(rollout.make_trace(annealed, 200)(start, cond, hyper)[1].rnd))
     assert rnd.max() <= 0.5 * annealed.learner.noise and rnd.max() > 0.45 * annealed.learner.noise
 
