@@ -106,8 +106,12 @@ def list_checkpoints(run_dir: Path) -> list[Path]:
     return sorted(folder.glob("chunk_*.npz"))
 
 
-def load(path: Path, template) -> tuple[object, dict]:
-    """Read a checkpoint into the structure of `template`; raises CheckpointError naming what is wrong."""
+def load(path: Path, template, defaults=None) -> tuple[object, dict]:
+    """Read a checkpoint into the structure of `template`; raises CheckpointError naming what is wrong.
+
+    `defaults`, a pytree like `template` with values, fills leaves that the file lacks (fields added to the
+    state since it was written); without it a missing leaf is an error.
+    """
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:
@@ -125,9 +129,12 @@ def load(path: Path, template) -> tuple[object, dict]:
             f"{path}: field format_version is {meta.get('format_version')}, expected {FORMAT_VERSION}"
         )
     leaves, treedef = jax.tree_util.tree_flatten_with_path(template)
+    fallback = {} if defaults is None else _flatten(defaults)
     restored = []
     for key_path, leaf in leaves:
         name = jax.tree_util.keystr(key_path)
+        if name not in arrays and name in fallback:
+            arrays[name] = fallback[name]
         if name not in arrays:
             raise CheckpointError(f"{path}: field {name} missing")
         value = arrays[name]

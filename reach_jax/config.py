@@ -76,7 +76,8 @@ class LearnerConfig:
     lr: float = 1.0  # SGD learning rate on squared error (SPEC §11 choice)
     noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (SPEC §11 choice)
     noise_final_ratio: float = 1.0  # bound after the anneal / noise; 1 = no anneal (SPEC §5 leaves decay open)
-    noise_anneal_trials: int = 300_000  # linear anneal to noise * noise_final_ratio, from the first full-field trial
+    noise_anneal_delay: int = 0  # trials from the first full-field trial to the start of the anneal (choice)
+    noise_anneal_trials: int = 300_000  # length of the linear anneal to noise * noise_final_ratio [trials] (choice)
     critic_floor: float = -0.3  # non-terminal critic targets never go below it, so "out" is always worse (choice)
 
 
@@ -116,6 +117,28 @@ class EvalConfig:
     figure_seed: int = 0  # seed index of the network per condition drawn in Fig. 4-5 (choice)
     reference_duration: float = 0.5  # minimum-jerk yardstick movement time [s], human-like (choice)
     peak_prominence: float = 0.1  # a speed peak must rise this fraction of the top speed above its bases (choice)
+    impedance_pair_stride: int = 4  # impedance at every 4th lattice pair's movement: 260 of 1040 (choice, cost)
+    impedance_max_steps: int = 50  # and at its first 50 acting states (1 s), where movements happen (choice)
+    impedance_min_sin_elbow: float = 0.2  # states with sin(theta2) below this (J near singular) are skipped (choice)
+
+
+@dataclass(frozen=True)
+class ClaimsConfig:
+    """How `claims` decides the paper's five claims and the Table-2 targets (our choices, docs/claims.md).
+
+    Stored with each run, so a run trained on held-out seeds carries the criteria fixed before it was trained.
+    """
+
+    level: float = 0.95  # two-sided coverage of every confidence interval over networks
+    matched_min_success: float = 0.90  # claim 1: the interval of mean success stays above this
+    robust_min_success_none: float = 0.85  # claim 4: random -> none success interval above this
+    robust_min_success_field: float = 0.80  # claim 4: random -> viscous success interval above this
+    size_fraction: float = 0.5  # an effect "as large as the paper's" reaches this fraction of it (log for time)
+    cell_points: float = 5.0  # Table-2 target: success and out within this many percentage points of the paper
+    cell_time: float = 0.25  # Table-2 target: mean time within this fraction of the paper's
+    curriculum_tail: float = 0.2  # stability is judged over the last 20% of each learner's trials
+    curriculum_min_fraction: float = 0.9  # a chunk below 90% of the whole field counts as a setback
+    curriculum_max_setbacks: float = 0.01  # a learner is stable with at most 1% of its tail chunks set back
 
 
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # Table 2 rows
@@ -137,6 +160,8 @@ class TrainConfig:
     noise_grid: tuple[float, ...] = ()  # sweep: exploration bounds; () = learner.noise
     lam_grid: tuple[float, ...] = ()  # sweep: lambdas of eq. 3; () = learner.lam
     noise_final_ratio_grid: tuple[float, ...] = ()  # sweep: anneal ratios; () = learner.noise_final_ratio
+    noise_anneal_delay_grid: tuple[float, ...] = ()  # sweep: anneal delays [trials]; () = learner.noise_anneal_delay
+    noise_anneal_trials_grid: tuple[float, ...] = ()  # sweep: anneal lengths [trials]; () = learner.noise_anneal_trials
     keep_every: int = 0  # also keep the checkpoint of every keep_every-th chunk (snapshots); 0 = newest two only
 
 
@@ -152,6 +177,7 @@ class Config:
     task: TaskConfig = field(default_factory=TaskConfig)
     force: ForceConfig = field(default_factory=ForceConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
+    claims: ClaimsConfig = field(default_factory=ClaimsConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
 
 
@@ -239,7 +265,7 @@ def from_dict(data: dict) -> Config:
 
 
 def _check_learner(learner: LearnerConfig) -> None:
-    for name in ("noise", "noise_final_ratio", "noise_anneal_trials"):
+    for name in ("noise", "noise_final_ratio", "noise_anneal_delay", "noise_anneal_trials"):
         if not getattr(learner, name) >= 0:
             raise ValueError(f"learner.{name}: must not be negative")
 
@@ -256,9 +282,11 @@ def _check_train(train: TrainConfig) -> None:
     bad = [c for c in train.conditions if c not in CONDITIONS]
     if bad or not train.conditions or len(set(train.conditions)) != len(train.conditions):
         raise ValueError(f"train.conditions: must be distinct names from {', '.join(CONDITIONS)}")
-    for name in ("lr_grid", "noise_grid", "lam_grid", "noise_final_ratio_grid"):
+    for name in ("lr_grid", "noise_grid", "lam_grid", "noise_final_ratio_grid", "noise_anneal_trials_grid"):
         if not all(math.isfinite(v) and v > 0 for v in getattr(train, name)):
             raise ValueError(f"train.{name}: must hold positive numbers")
+    if not all(math.isfinite(v) and v >= 0 for v in train.noise_anneal_delay_grid):
+        raise ValueError("train.noise_anneal_delay_grid: must hold numbers that are not negative")
 
 
 def to_json(config: Config) -> str:

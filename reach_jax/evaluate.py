@@ -39,7 +39,6 @@ all 12 ordered pairs. The after-effect and quality measures are defined in `afte
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import math
 import sys
@@ -50,30 +49,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import arm, checkpoint, network, sensor, task, train
+from reach_jax import checkpoint, claims, impedance, sensor, stats, task, train
 from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config, error_line
+from reach_jax.episodes import FAIL, OUTCOME_NAMES, SUCCESS, Episode, n_steps, network_policy, run_episodes
 
 EXIT_USAGE = 2  # missing or corrupt run directory; nothing written
 EXIT_IO = 4  # writing the results failed
 
 EVAL_DIR = "eval"
-
-# Outcome codes of an episode.
-SUCCESS, OUT, FAIL = 0, 1, 2
-OUTCOME_NAMES = ("success", "out", "fail")
-
-# The paper's Table 2: (learning, test) -> (success, out, fail, mean time [s]), summed over 2 networks.
-PAPER_TABLE2 = {
-    ("none", "none"): (2071, 5, 4, 0.324),
-    ("none", "viscous"): (1139, 926, 15, 2.03),
-    ("viscous", "none"): (1869, 193, 18, 0.793),
-    ("viscous", "viscous"): (2035, 38, 7, 0.467),
-    ("random", "none"): (2038, 5, 37, 0.546),
-    ("random", "viscous"): (1833, 227, 20, 0.909),
-    ("random_nopast", "none"): (1887, 0, 193, 0.896),
-    ("random_nopast", "viscous"): (1165, 853, 62, 2.12),
-}
-PAPER_NETWORKS = 2  # networks summed in each cell of the paper's Table 2
 
 # Fig. 4 panels: (letter, learning condition, test condition).
 FIG4_PANELS = (
@@ -86,32 +69,6 @@ FIG4_PANELS = (
 )
 FIG5_PANELS = ("a", "d")
 CORNER_NAMES = ("lower left", "lower right", "upper left", "upper right")  # order of `corner_centres`
-
-
-class Obs(NamedTuple):
-    """What a policy sees at one step; scripted controllers may use more than the network does."""
-
-    x: jax.Array  # (125,) network input, masked by the learning condition
-    arm: jax.Array  # (4,) arm state [rad, rad/s]
-    hand: jax.Array  # (2,) hand position [m]
-    hand_vel: jax.Array  # (2,) hand velocity [m/s]
-    start: jax.Array  # (2,) start position [m]
-    target: jax.Array  # (2,) target position [m]
-    t: jax.Array  # () steps taken so far
-
-
-class Episode(NamedTuple):
-    """One test episode (leading batch axes when batched)."""
-
-    outcome: jax.Array  # () SUCCESS, OUT or FAIL
-    steps: jax.Array  # () steps until the episode ended; n_steps for a fail
-    hand: jax.Array  # (n_steps + 1, 2) hand path [m], held at its last point after the end
-    speed: jax.Array  # (n_steps + 1,) hand tangential speed [m/s], held after the end
-
-
-def n_steps(cfg: Config) -> int:
-    """Steps of a test episode: cfg.eval.max_time / cfg.arm.dt (200)."""
-    return round(cfg.eval.max_time / cfg.arm.dt)
 
 
 def lattice_points(cfg: Config) -> np.ndarray:
@@ -157,97 +114,6 @@ def corner_pairs(cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return c[idx[:, 0]], c[idx[:, 1]], idx[:, 0]
 
 
-def run_episode(policy, params, mask: jax.Array, field: jax.Array, start: jax.Array, target: jax.Array, cfg: Config):
-    """One noise-free test episode from rest at `start`.
-
-    Args:
-      policy: (params, Obs) -> (2,) torque [N m].
-      params: the policy's parameters.
-      mask: (125,) input mask of the learning condition.
-      field: (2, 2) viscous field of the test condition [N s/m].
-      start: (2,) start hand position [m].
-      target: (2,) target position [m].
-      cfg: model config.
-
-    Returns:
-      Episode.
-    """
-    tau_max = jnp.asarray(cfg.arm.tau_max)
-    no_force = jnp.zeros(2)
-    s0 = jnp.concatenate([arm.inverse_kinematics(start, cfg.arm), jnp.zeros(2)])
-
-    def body(carry, t):
-        state, prev, prev_tau, done, outcome, steps = carry
-        obs = Obs(
-            x=task.observe(state, prev, prev_tau, target, mask, cfg),
-            arm=state,
-            hand=arm.hand_position(state[:2], cfg.arm),
-            hand_vel=arm.hand_velocity(state, cfg.arm),
-            start=start,
-            target=target,
-            t=t,
-        )
-        tau = jnp.clip(policy(params, obs), -tau_max, tau_max)
-        moved = arm.step(state, tau, field, no_force, cfg.arm)
-        hand = arm.hand_position(moved[:2], cfg.arm)
-        vel = arm.hand_velocity(moved, cfg.arm)
-        out = arm.is_out(moved, cfg.arm)
-        goal = task.goal_reached(hand, vel, target, cfg) & ~out
-        ended = (out | goal) & ~done
-        outcome = jnp.where(ended, jnp.where(out, OUT, SUCCESS), outcome)
-        steps = jnp.where(ended, t + 1, steps)
-        # An ended episode is frozen, so its path and speed stay at their final values.
-        keep = lambda a, b: jnp.where(done, a, b)  # noqa: E731
-        new = (keep(state, moved), keep(prev, state), keep(prev_tau, tau), done | out | goal, outcome, steps)
-        return new, (arm.hand_position(new[0][:2], cfg.arm), jnp.linalg.norm(arm.hand_velocity(new[0], cfg.arm)))
-
-    total = n_steps(cfg)
-    init = (s0, s0, jnp.zeros(2), jnp.array(False), jnp.array(FAIL, jnp.int32), jnp.array(total, jnp.int32))
-    (_, _, _, _, outcome, steps), (hand, speed) = jax.lax.scan(body, init, jnp.arange(total, dtype=jnp.int32))
-    hand = jnp.concatenate([arm.hand_position(s0[:2], cfg.arm)[None], hand])
-    speed = jnp.concatenate([jnp.zeros(1), speed])
-    return Episode(outcome=outcome, steps=steps, hand=hand, speed=speed)
-
-
-@functools.cache
-def _compiled(policy, cfg: Config):
-    one = functools.partial(run_episode, policy, cfg=cfg)
-    over_pairs = jax.vmap(one, in_axes=(None, None, None, 0, 0))
-    over_tests = jax.vmap(over_pairs, in_axes=(None, None, 0, None, None))
-    over_nets = jax.vmap(over_tests, in_axes=(0, 0, None, None, None))
-    return jax.jit(over_nets)
-
-
-def evaluate(policy, params, masks, fields, starts, targets, cfg: Config) -> Episode:
-    """Every pair x network x test condition in one jitted, vmapped rollout.
-
-    Args:
-      policy: (params, Obs) -> (2,) torque [N m]; must be hashable (a module-level or cached function).
-      params: policy parameters with a leading network axis N.
-      masks: (N, 125) input masks of the networks' learning conditions.
-      fields: (C, 2, 2) viscous fields of the test conditions [N s/m].
-      starts: (P, 2) start positions [m].
-      targets: (P, 2) target positions [m].
-      cfg: model config.
-
-    Returns:
-      Episode with leading axes (N, C, P).
-    """
-    run = _compiled(policy, cfg)
-    return run(params, jnp.asarray(masks), jnp.asarray(fields), jnp.asarray(starts), jnp.asarray(targets))
-
-
-@functools.cache
-def network_policy(cfg: Config):
-    """The trained actor as a policy: (params, Obs) -> (2,) torque [N m], from Obs.x only, without noise."""
-
-    def policy(params, obs: Obs) -> jax.Array:
-        m = network.apply(params, obs.x, cfg)[1:]
-        return network.torque(m, jnp.zeros_like(m), cfg)
-
-    return policy
-
-
 def test_fields(cfg: Config) -> jax.Array:
     """(C, 2, 2) viscous fields [N s/m] of TEST_CONDITIONS."""
     return jnp.stack([task.make_condition(name, cfg).field for name in TEST_CONDITIONS])
@@ -267,54 +133,105 @@ def count(outcome: np.ndarray, steps: np.ndarray, cfg: Config) -> dict:
     }
 
 
-def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int]], cfg: Config) -> dict:
+def recipe_index(hypers) -> tuple[list[dict], list[int]]:
+    """The distinct hyperparameter sets (recipes) of a batch, in batch order, and each learner's recipe index.
+
+    Args:
+      hypers: rollout.Hyper with a leading learner axis.
+    """
+    columns = [np.asarray(getattr(hypers, n)) for n in train.HYPER_GRIDS]
+    values = [tuple(float(v) for v in row) for row in zip(*columns, strict=True)]
+    distinct = list(dict.fromkeys(values))
+    return [dict(zip(train.HYPER_GRIDS, v, strict=True)) for v in distinct], [distinct.index(v) for v in values]
+
+
+def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int]], recipe_of, cfg: Config) -> dict:
     """Table 2 as a JSON-ready dict: counts summed over each learning condition's networks, and per network.
 
     Args:
       outcome: (N, C, 1040) outcome codes, networks in `learners` order, tests in TEST_CONDITIONS order.
       steps: (N, C, 1040) episode lengths [steps].
       learners: (learning condition, seed index) per network.
+      recipe_of: (N,) recipe index per network (`recipe_index`).
       cfg: model config.
+
+    Returns:
+      {"rows": sums over every network of a condition, "first_two": sums over seeds 0 and 1 per recipe,
+      "per_network": one row per network and test, "pairs_per_network"}.
     """
-    rows, per_network = [], []
-    for learning in [c for c in CONDITIONS if any(c == name for name, _ in learners)]:
+    rows, first_two, per_network = [], [], []
+    present = [c for c in CONDITIONS if any(c == name for name, _ in learners)]
+    for learning in present:
         nets = [i for i, (name, _) in enumerate(learners) if name == learning]
         for j, test in enumerate(TEST_CONDITIONS):
             cell = count(outcome[nets, j], steps[nets, j], cfg)
             rows.append({"learning": learning, "test": test, "networks": len(nets), **cell})
+    for k in sorted(set(recipe_of)):
+        for learning in present:
+            nets = [i for i, (name, s) in enumerate(learners) if name == learning and s < 2 and recipe_of[i] == k]
+            for j, test in enumerate(TEST_CONDITIONS):
+                cell = count(outcome[nets, j], steps[nets, j], cfg)
+                first_two.append({"learning": learning, "test": test, "recipe": k, "networks": len(nets), **cell})
     for i, (learning, seed) in enumerate(learners):
         for j, test in enumerate(TEST_CONDITIONS):
             cell = count(outcome[i, j], steps[i, j], cfg)
-            per_network.append({"learner": i, "learning": learning, "seed": seed, "test": test, **cell})
-    return {"rows": rows, "pairs_per_network": int(outcome.shape[-1]), "per_network": per_network}
+            per_network.append(
+                {"learner": i, "learning": learning, "seed": seed, "recipe": recipe_of[i], "test": test, **cell}
+            )
+    return {
+        "rows": rows,
+        "first_two": first_two,
+        "pairs_per_network": int(outcome.shape[-1]),
+        "per_network": per_network,
+    }
 
 
 def _cell(success: int, out: int, fail: int, mean_time: float) -> str:
     return f"{success}-{out}-{fail} ({mean_time:.3g} s)"
 
 
-def table2_markdown(table: dict, source: str) -> str:
-    """Table 2 in Markdown, our cells beside the paper's."""
-    pairs = table["pairs_per_network"]
-    cols = [f"{t}: {who}" for t in TEST_CONDITIONS for who in ("ours", "paper")]
+def _interval(ci: dict, scale: float = 100.0, digits: int = 1) -> str:
+    if ci["low"] is None:
+        return f"{ci['mean'] * scale:.{digits}f}"
+    return f"{ci['mean'] * scale:.{digits}f} [{ci['low'] * scale:.{digits}f}, {ci['high'] * scale:.{digits}f}]"
+
+
+def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
+    """Table 2 in Markdown per recipe: mean per network with its interval, our networks 0-1 summed, the paper's."""
+    level = recipes[0]["level"] if recipes else 0.95
     lines = [
-        f"# Table 2: success-out-fail (mean reaching time) — {source}",
+        f"# Table 2 — {source}",
         "",
-        f"Ours: summed over the networks of each learning condition, {pairs} (start, target) pairs per network.",
-        f"Paper: summed over {PAPER_NETWORKS} networks x 1040 pairs. Out and fail count as 4.0 s in the mean time.",
-        "",
-        "| learning \\ test | networks | " + " | ".join(cols) + " |",
-        "|---|---|" + "---|" * len(cols),
+        f"Mean per network with its {level:.0%} t-interval over networks, {table['pairs_per_network']} (start,"
+        " target) pairs per network; out and fail count as 4.0 s in the mean time. Beside it, success-out-fail"
+        f" (mean time) summed over our networks of seeds 0 and 1, and the paper's sum over its {claims.PAPER_NETWORKS}"
+        ' networks. "near paper": success and out within the target\'s percentage points, time within its'
+        " fraction (S / O / T).",
     ]
-    by_cell = {(r["learning"], r["test"]): r for r in table["rows"]}
-    for learning in [c for c in CONDITIONS if any(r["learning"] == c for r in table["rows"])]:
-        cells = []
-        for t in TEST_CONDITIONS:
-            r = by_cell[(learning, t)]
-            cells += [_cell(r["success"], r["out"], r["fail"], r["mean_time_s"]), _cell(*PAPER_TABLE2[(learning, t)])]
-        n = by_cell[(learning, TEST_CONDITIONS[0])]["networks"]
-        lines.append(f"| {learning} | {n} | " + " | ".join(cells) + " |")
+    sums = {(r["learning"], r["test"], r["recipe"]): r for r in table["first_two"]}
+    for k, recipe in enumerate(recipes):
+        lines += [
+            "",
+            f"## Recipe {k}: {_recipe_name(recipe['hypers'])} "
+            f"({recipe['networks_per_condition']} networks per condition)",
+            "",
+            "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for cell in recipe["cells"]:
+            first = sums.get((cell["learning"], cell["test"], k))
+            ours01 = _cell(first["success"], first["out"], first["fail"], first["mean_time_s"]) if first else "–"
+            near = " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
+            lines.append(
+                f"| {cell['learning']} → {cell['test']} | {_interval(cell['success'])} | {_interval(cell['out'])} | "
+                f"{_interval(cell['mean_time_s'], 1.0, 2)} | {ours01} | "
+                f"{_cell(*claims.PAPER_TABLE2[(cell['learning'], cell['test'])])} | {near} |"
+            )
     return "\n".join(lines) + "\n"
+
+
+def _recipe_name(hypers: dict) -> str:
+    return ", ".join(f"{k} {v:g}" for k, v in hypers.items())
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -616,83 +533,159 @@ def read_metrics(run_dir: Path) -> list[dict]:
     return rows
 
 
-def load_run(run_dir: Path) -> RunData:
-    """Config, newest checkpoint and metrics of a run; raises CheckpointError naming the bad path."""
+def load_run(run_dir: Path, path: Path | None = None) -> RunData:
+    """Config, newest (or the given) checkpoint and metrics up to it; raises CheckpointError naming the bad path."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise checkpoint.CheckpointError(f"{run_dir}: not a run directory (missing or not a directory)")
+    if path is not None and not Path(path).is_file():
+        raise checkpoint.CheckpointError(f"{path}: no such checkpoint")
     cfg = train.read_config(run_dir)
-    batch, chunk = train.load_batch(run_dir, cfg)
-    return RunData(cfg, batch, chunk, train.learner_table(cfg.train), read_metrics(run_dir))
+    batch, chunk = train.load_batch(run_dir, cfg, path)
+    metrics = [r for r in read_metrics(run_dir) if r.get("chunk", 0) <= chunk]
+    return RunData(cfg, batch, chunk, train.learner_table(cfg.train), metrics)
+
+
+def pool_aftereffect(per_seed: list[dict], level: float) -> dict:
+    """The after-effect measures of several seeds together: mean fractions, and the angle with its interval."""
+    if not per_seed:
+        return {}
+
+    def mean(key):
+        values = [a[key] for a in per_seed if a[key] is not None]
+        return float(np.mean(values)) if values else None
+
+    return {
+        "seeds": len(per_seed),
+        "fraction_b_with_force": mean("fraction_b_with_force"),
+        "fraction_c_against_force": mean("fraction_c_against_force"),
+        "mean_pull_b_to_force_deg": mean("mean_pull_b_to_force_deg"),
+        "mean_pull_c_to_force_deg": mean("mean_pull_c_to_force_deg"),
+        "angle_deg": stats.mean_ci([a["mean_angle_deg"] for a in per_seed if a["mean_angle_deg"] is not None], level),
+    }
+
+
+def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
+    """Mean over networks (with its interval) of each network's median gains, per learning x test cell."""
+    rows = [r for r in summary["per_network"] if r["learner"] in nets]
+    names = [k for k in rows[0] if k.startswith(("stiffness_", "damping_", "passive_")) and "per_m" not in k]
+    cells = []
+    for learning, test in dict.fromkeys((r["learning"], r["test"]) for r in rows):
+        sub = [r for r in rows if r["learning"] == learning and r["test"] == test and r["states"] > 0]
+        cells.append(
+            {
+                "learning": learning,
+                "test": test,
+                **{n: stats.mean_ci([r[n]["median"] for r in sub], level) for n in names},
+            }
+        )
+    return cells
 
 
 def evaluate_run(data: RunData) -> dict:
     """Run the test protocol on every network of a run; JSON-ready results and the arrays for the figures."""
     cfg = data.cfg
+    level = cfg.claims.level
     starts, targets = test_pairs(cfg)
     c_starts, c_targets, c_corner = corner_pairs(cfg)
-    ep = evaluate(
-        network_policy(cfg),
-        data.batch.states.params,
-        data.batch.conds.input_mask,
-        test_fields(cfg),
-        np.concatenate([starts, c_starts]),
-        np.concatenate([targets, c_targets]),
-        cfg,
+    params, masks = data.batch.states.params, data.batch.conds.input_mask
+    policy = network_policy(cfg)
+    ep, traj = jax.device_get(
+        run_episodes(
+            policy,
+            params,
+            masks,
+            test_fields(cfg),
+            np.concatenate([starts, c_starts]),
+            np.concatenate([targets, c_targets]),
+            cfg,
+        )
     )
-    ep = Episode(*jax.device_get(ep))
     p = len(starts)
     lattice = Episode(*(a[:, :, :p] for a in ep))
     corners = Episode(*(a[:, :, p:] for a in ep))
+    lattice_traj = type(traj)(*(a[:, :, :p] for a in traj))
+    recipes, recipe_of = recipe_index(data.batch.hypers)
+    table = table2(lattice.outcome, lattice.steps, data.learners, recipe_of, cfg)
+    for row in table["per_network"]:
+        row.update(recipes[row["recipe"]])
 
-    def network(learning):
-        for i, (name, seed) in enumerate(data.learners):
-            if name == learning and seed == cfg.eval.figure_seed:
+    def network(learning, seed, recipe):
+        for i, (name, s) in enumerate(data.learners):
+            if name == learning and s == seed and recipe_of[i] == recipe:
                 return i
         return None
 
     panels = {}
     for letter, learning, test in FIG4_PANELS:
-        i = network(learning)
+        i = network(learning, cfg.eval.figure_seed, 0)
         if i is not None:
-            j = TEST_CONDITIONS.index(test)
-            panels[letter] = Episode(*(a[i, j] for a in corners))
-    after = None
-    if all(k in panels for k in "abcd"):
-        viscous = np.asarray(task.make_condition("viscous", cfg).field)
-        after = aftereffect({k: panels[k].hand for k in "abcd"}, c_starts, c_targets, c_corner, viscous)
-        after = {"seed": cfg.eval.figure_seed, **after}
+            panels[letter] = Episode(*(a[i, TEST_CONDITIONS.index(test)] for a in corners))
+    viscous = np.asarray(task.make_condition("viscous", cfg).field)
+    per_seed = []
+    for k in range(len(recipes)):
+        for seed in range(cfg.train.seeds):
+            i, j = network("none", seed, k), network("viscous", seed, k)
+            if i is None or j is None:
+                continue
+            hands = {"a": corners.hand[i, 0], "b": corners.hand[i, 1], "c": corners.hand[j, 0], "d": corners.hand[j, 1]}
+            per_seed.append({"recipe": k, "seed": seed, **aftereffect(hands, c_starts, c_targets, c_corner, viscous)})
+    main = [a for a in per_seed if a["recipe"] == 0 and a["seed"] == cfg.eval.figure_seed]
+    after = (
+        {**main[0], "per_seed": per_seed}
+        if main
+        else {"error": "needs the none and viscous learning conditions at seed cfg.eval.figure_seed"}
+    )
+    gains = impedance.measure(policy, params, masks, lattice, lattice_traj, starts, targets, cfg)
+    imp = impedance.summarize(gains, data.learners, TEST_CONDITIONS, viscous)
+    for row in imp["per_network"]:
+        row["recipe"] = recipe_of[row["learner"]]
+    verdicts = []
+    for k, hypers in enumerate(recipes):
+        nets = [i for i in range(len(data.learners)) if recipe_of[i] == k]
+        cells = claims.Cells([r for r in table["per_network"] if r["recipe"] == k], table["pairs_per_network"])
+        after_k = pool_aftereffect([a for a in per_seed if a["recipe"] == k], level)
+        verdicts.append(
+            {
+                "hypers": hypers,
+                "level": level,
+                "networks_per_condition": cfg.train.seeds,
+                "claims": claims.recipe_claims(cells, after_k, cfg),
+                "aftereffect": after_k,
+                "cells": claims.table_cells(cells, cfg.claims),
+                "impedance": impedance_cells(imp, nets, level),
+                "curriculum": claims.curriculum_stability(data.metrics, nets, cfg.train.trials, cfg),
+            }
+        )
     trials = np.asarray(data.batch.states.trials)
-    table = table2(lattice.outcome, lattice.steps, data.learners, cfg)
-    # A sweep has several networks per (condition, seed); their hyperparameters tell them apart.
-    hypers = jax.device_get(data.batch.hypers)
-    for row in table["per_network"]:
-        row.update({name: float(getattr(hypers, name)[row["learner"]]) for name in train.HYPER_GRIDS})
     return {
-        "table2": {
-            **table,
-            "chunk": data.chunk,
-            "trials_per_network": [int(t) for t in trials],
-        },
-        "aftereffect": after
-        or {"error": "needs the none and viscous learning conditions at seed cfg.eval.figure_seed"},
+        "table2": {**table, "chunk": data.chunk, "trials_per_network": [int(t) for t in trials]},
+        "aftereffect": after,
         "quality": quality(lattice, data.learners, starts, targets, cfg),
+        "impedance": {**imp, "recipes": recipes, "chunk": data.chunk},
+        "claims": {"chunk": data.chunk, "trials_per_network": cfg.train.trials, "recipes": verdicts},
         "panels": panels,
         "corners": (c_starts, c_targets, c_corner),
+        "gains": gains,
     }
 
 
-def write_results(run_dir: Path, data: RunData, results: dict) -> Path:
-    """Write every file of RUN_DIR/eval/; returns that directory."""
+def write_results(run_dir: Path, data: RunData, results: dict, out: Path | None = None) -> Path:
+    """Write every file of the evaluation into `out` (default RUN_DIR/eval/); returns that directory."""
     from reach_jax import figures
 
     cfg = data.cfg
-    out = Path(run_dir) / EVAL_DIR
-    out.mkdir(exist_ok=True)
-    for name in ("table2", "aftereffect", "quality"):
+    out = Path(run_dir) / EVAL_DIR if out is None else Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("table2", "aftereffect", "quality", "impedance", "claims"):
         checkpoint.atomic_write_bytes(out / f"{name}.json", json.dumps(results[name], indent=2).encode())
-    md = table2_markdown(results["table2"], f"{run_dir} (chunk {data.chunk})")
-    checkpoint.atomic_write_bytes(out / "table2.md", md.encode())
+    source = f"{run_dir} (chunk {data.chunk})"
+    recipes = results["claims"]["recipes"]
+    checkpoint.atomic_write_bytes(out / "table2.md", table2_markdown(results["table2"], recipes, source).encode())
+    checkpoint.atomic_write_bytes(out / "claims.md", claims.claims_markdown(results["claims"], source).encode())
+    figures.impedance(results["impedance"], results["gains"], data.learners, cfg).savefig(
+        out / "impedance.png", dpi=110
+    )
     figures.fig4(results["panels"], *results["corners"], cfg).savefig(out / "fig4.png", dpi=110)
     figures.fig5(results["panels"], results["corners"][2], cfg).savefig(out / "fig5.png", dpi=110)
     figures.learning_curves(data.metrics, cfg).savefig(out / "learning_curves.png", dpi=110)
@@ -709,6 +702,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The command-line interface of `python -m reach_jax.evaluate`."""
     p = _Parser(prog="python -m reach_jax.evaluate", description=__doc__.splitlines()[0])
     p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run directory written by reach_jax.train")
+    p.add_argument("--checkpoint", type=Path, metavar="PATH", help="evaluate this checkpoint instead of the newest")
+    p.add_argument("--out", type=Path, metavar="DIR", help="write the results here instead of RUN_DIR/eval")
     return p
 
 
@@ -717,15 +712,16 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        data = load_run(args.run_dir)
+        data = load_run(args.run_dir, args.checkpoint)
     except checkpoint.CheckpointError as exc:
         sys.stderr.write(error_line(parser.prog, str(exc)))
         return EXIT_USAGE
     results = evaluate_run(data)
     try:
-        out = write_results(args.run_dir, data, results)
+        out = write_results(args.run_dir, data, results, args.out)
     except OSError as exc:
-        sys.stderr.write(error_line(parser.prog, f"{args.run_dir / EVAL_DIR}: write failed ({exc})"))
+        where = args.out or args.run_dir / EVAL_DIR
+        sys.stderr.write(error_line(parser.prog, f"{where}: write failed ({exc})"))
         return EXIT_IO
     print(f"evaluation written to {out}", file=sys.stderr)
     return 0

@@ -181,3 +181,91 @@ def learning_curves(metrics: list[dict], cfg: Config):
     fig.suptitle(f"Learning curves ({cfg.train.trials:,} trials planned per learner)")
     fig.tight_layout()
     return fig
+
+
+def _ellipse(matrix: np.ndarray, n: int = 73) -> np.ndarray:
+    """(n, 2) image of the unit circle under `matrix` (2, 2): the gain's answer to a unit change in each direction."""
+    phi = np.linspace(0.0, 2.0 * np.pi, n)
+    return np.stack([np.cos(phi), np.sin(phi)], axis=1) @ np.asarray(matrix).T
+
+
+def impedance(summary: dict, gains: dict, learners, cfg: Config):
+    """Learned hand stiffness and damping ellipses per learning condition, and the damping along the field's axes.
+
+    Drawn as Mussa-Ivaldi, Hogan & Bizzi (1985) drew human hand stiffness: each ellipse is the force
+    answering a unit hand displacement (stiffness, N/m) or a unit hand velocity (damping, N s/m) in every
+    direction, from a network's median gain matrix over its test-movement states. Thin: one network; thick:
+    the element-wise median over a condition's networks. Right: each network's median damping along the
+    field's unstable and stable axes.
+
+    Args:
+      summary: output of `impedance.summarize` (with "recipes" and per-network "recipe").
+      gains: output of `impedance.measure`.
+      learners: (learning condition, seed index) per network.
+      cfg: model config.
+    """
+    tests = list(dict.fromkeys(r["test"] for r in summary["per_network"]))
+    axes_info = summary["field_axes"]
+    fig, axes = plt.subplots(len(tests), 3, figsize=(15, 5 * len(tests)), squeeze=False)
+    conditions = list(dict.fromkeys(name for name, _ in learners))
+    for row, test in enumerate(tests):
+        rows = [r for r in summary["per_network"] if r["test"] == test and r["states"] > 0]
+        for col, (key, label) in enumerate(
+            (("stiffness_N_per_m", "stiffness [N/m]"), ("damping_Ns_per_m", "damping [N s/m]"))
+        ):
+            ax = axes[row, col]
+            for cond in conditions:
+                mats = [np.asarray(r[key]["median"]) for r in rows if r["learning"] == cond]
+                for m in mats:
+                    e = _ellipse(m)
+                    ax.plot(e[:, 0], e[:, 1], color=CONDITION_COLOR.get(cond, "k"), lw=0.5, alpha=0.5)
+                if mats:
+                    e = _ellipse(np.median(mats, axis=0))
+                    ax.plot(e[:, 0], e[:, 1], color=CONDITION_COLOR.get(cond, "k"), lw=2.2, label=cond)
+            if col == 1:
+                valid = gains["valid"][:, row]
+                passive = np.median(gains["passive"][:, row][valid], axis=0) if valid.any() else np.zeros((2, 2))
+                e = _ellipse(passive)
+                ax.plot(e[:, 0], e[:, 1], color="0.4", lw=1.5, ls="--", label="passive arm")
+                lim = max(np.abs(ax.get_xlim()).max(), np.abs(ax.get_ylim()).max())
+                for info, color in zip(axes_info, ("tab:red", "tab:cyan"), strict=True):
+                    a = np.radians(info["direction_deg"])
+                    ax.plot(
+                        [-lim * np.cos(a), lim * np.cos(a)],
+                        [-lim * np.sin(a), lim * np.sin(a)],
+                        color=color,
+                        lw=0.8,
+                        ls=":",
+                        label=f"field {info['name']} axis ({info['eigenvalue_Ns_per_m']:+.1f})",
+                    )
+            ax.axhline(0, color="0.8", lw=0.5)
+            ax.axvline(0, color="0.8", lw=0.5)
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.set_title(f"test: {test} — {label}", fontsize=10)
+            ax.set_xlabel(f"x component [{label.split('[')[1]}")
+            ax.legend(fontsize=7, loc="upper right")
+        ax = axes[row, 2]
+        for k, cond in enumerate(conditions):
+            for j, (name, marker) in enumerate((("unstable", "o"), ("stable", "s"))):
+                vals = [r[f"damping_{name}"]["median"] for r in rows if r["learning"] == cond]
+                x = k + (j - 0.5) * 0.3 + np.linspace(-0.06, 0.06, max(len(vals), 1))[: len(vals)]
+                ax.scatter(
+                    x,
+                    vals,
+                    marker=marker,
+                    s=18,
+                    color=CONDITION_COLOR.get(cond, "k"),
+                    facecolors="none" if name == "stable" else None,
+                    label=f"{name} axis" if k == 0 else None,
+                )
+        ax.axhline(
+            axes_info[0]["eigenvalue_Ns_per_m"], color="tab:red", lw=0.8, ls=":", label="field's unstable eigenvalue"
+        )
+        ax.axhline(0, color="0.6", lw=0.5)
+        ax.set_xticks(range(len(conditions)), conditions, fontsize=8)
+        ax.set_ylabel("learned damping along the axis [N s/m]")
+        ax.set_title(f"test: {test} — damping along the field's axes (per network)", fontsize=10)
+        ax.legend(fontsize=7)
+    fig.suptitle("Learned hand impedance at the states of each network's own test movements")
+    fig.tight_layout()
+    return fig

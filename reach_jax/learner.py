@@ -75,18 +75,27 @@ def update_n_max(n_max: jax.Array, n_steps: jax.Array, lam: jax.Array) -> jax.Ar
 
 
 def exploration_bound(
-    noise: jax.Array, final_ratio: jax.Array, trials: jax.Array, full_at: jax.Array, cfg: LearnerConfig
+    noise: jax.Array,
+    final_ratio: jax.Array,
+    delay: jax.Array,
+    duration: jax.Array,
+    trials: jax.Array,
+    full_at: jax.Array,
 ) -> jax.Array:
-    """() bound b of rnd ~ U(-b, b): `noise` until the curriculum is full, then linear to noise * final_ratio.
+    """() bound b of rnd ~ U(-b, b): `noise`, then a linear anneal to noise * final_ratio.
+
+    The anneal starts `delay` trials after the curriculum first reached the whole field and lasts `duration`
+    trials; before the field is first full there is no anneal, however long that takes.
 
     Args:
       noise: () the learner's starting bound.
-      final_ratio: () the learner's bound after the anneal, as a fraction of `noise` (1: no anneal).
+      final_ratio: () the bound after the anneal, as a fraction of `noise` (1: no anneal).
+      delay: () trials from the first full field to the start of the anneal.
+      duration: () trials the anneal lasts (at least 1).
       trials: () trials ended so far.
       full_at: () trial count when the curriculum first reached its maximum distance; negative before.
-      cfg: learner constants (noise_anneal_trials).
     """
-    done = (trials - full_at) / max(cfg.noise_anneal_trials, 1)
+    done = (trials - full_at - delay) / jnp.maximum(duration, 1.0)
     frac = jnp.where(full_at < 0, 0.0, jnp.clip(done, 0.0, 1.0))
     return noise * (1.0 + (final_ratio - 1.0) * frac)
 

@@ -78,6 +78,15 @@ class Hyper:
     noise: jax.Array  # () exploration bound rnd ~ U(-noise, noise) until the anneal (learner.exploration_bound)
     lam: jax.Array  # () lambda of eq. 3
     noise_final_ratio: jax.Array  # () bound after the anneal as a fraction of `noise`; 1 = no anneal
+    noise_anneal_delay: jax.Array  # () trials from the first full field to the start of the anneal
+    noise_anneal_trials: jax.Array  # () trials the anneal lasts
+
+
+def exploration_bound(hyper: Hyper, trials: jax.Array, full_at: jax.Array) -> jax.Array:
+    """The learner's exploration bound after `trials` trials (`learner.exploration_bound` with its hyperparameters)."""
+    return learner.exploration_bound(
+        hyper.noise, hyper.noise_final_ratio, hyper.noise_anneal_delay, hyper.noise_anneal_trials, trials, full_at
+    )
 
 
 def default_hyper(cfg: Config) -> Hyper:
@@ -88,6 +97,8 @@ def default_hyper(cfg: Config) -> Hyper:
         noise=jnp.asarray(c.noise),
         lam=jnp.asarray(c.lam),
         noise_final_ratio=jnp.asarray(c.noise_final_ratio),
+        noise_anneal_delay=jnp.asarray(float(c.noise_anneal_delay)),
+        noise_anneal_trials=jnp.asarray(float(c.noise_anneal_trials)),
     )
 
 
@@ -209,7 +220,7 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
       cfg: model config.
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
     """
-    bound = learner.exploration_bound(hyper.noise, hyper.noise_final_ratio, state.trials, state.full_at, cfg.learner)
+    bound = exploration_bound(hyper, state.trials, state.full_at)
     rnd, draws = split_uniforms(u, bound, cfg)
     x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
     rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)

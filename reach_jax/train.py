@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import checkpoint, learner, rollout, task
+from reach_jax import checkpoint, rollout, task
 from reach_jax.config import (
     CONDITIONS,
     MAX_HIDDEN_PAD,
@@ -54,7 +54,14 @@ class NumericsError(RuntimeError):
 
 
 # rollout.Hyper field -> the TrainConfig grid that sweeps it (its default is the LearnerConfig field of that name).
-HYPER_GRIDS = {"lr": "lr_grid", "noise": "noise_grid", "lam": "lam_grid", "noise_final_ratio": "noise_final_ratio_grid"}
+HYPER_GRIDS = {
+    "lr": "lr_grid",
+    "noise": "noise_grid",
+    "lam": "lam_grid",
+    "noise_final_ratio": "noise_final_ratio_grid",
+    "noise_anneal_delay": "noise_anneal_delay_grid",
+    "noise_anneal_trials": "noise_anneal_trials_grid",
+}
 
 
 def hyper_grid(cfg: Config) -> list[dict[str, float]]:
@@ -85,7 +92,7 @@ def init_batch(cfg: Config) -> Batch:
     conds = task.stack_conditions([c for c, _ in table], cfg)
     keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
     states = jax.vmap(lambda k, c: rollout.init_learner(k, c, cfg))(keys, conds)
-    hypers = rollout.Hyper(**{name: jnp.asarray([h[name] for h in learner_hypers(cfg)]) for name in HYPER_GRIDS})
+    hypers = rollout.Hyper(**{name: jnp.asarray([float(h[name]) for h in learner_hypers(cfg)]) for name in HYPER_GRIDS})
     # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
     return Batch(*jax.tree.map(jnp.copy, (states, conds, hypers)))
 
@@ -116,8 +123,8 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
     trials, steps = np.asarray(states.trials), np.asarray(states.steps)
     distance, n_max = np.asarray(states.distance), np.asarray(states.n_max)
     hypers = learner_hypers(cfg)
-    noises, ratios = (np.array([h[name] for h in hypers]) for name in ("noise", "noise_final_ratio"))
-    bound = np.asarray(learner.exploration_bound(noises, ratios, states.trials, states.full_at, cfg.learner))
+    columns = rollout.Hyper(**{name: jnp.asarray([h[name] for h in hypers]) for name in HYPER_GRIDS})
+    bound = np.asarray(rollout.exploration_bound(columns, states.trials, states.full_at))
     rows = []
     for i, ((cond, seed), hyper) in enumerate(zip(table, hypers, strict=True)):
         ended = int(s.trials[i])
@@ -188,7 +195,9 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[Ba
         raise checkpoint.CheckpointError(f"{Path(run_dir) / checkpoint.CHECKPOINT_DIR}: no checkpoints")
     path = path or ckpts[-1]
     fresh = jax.eval_shape(lambda: init_batch(cfg))
-    tree, meta = checkpoint.load(path, {"states": fresh.states, "hypers": fresh.hypers})
+    # Hyperparameters added since the checkpoint was written take their values from the config.
+    defaults = {"hypers": jax.tree.map(np.asarray, init_batch(cfg).hypers)}
+    tree, meta = checkpoint.load(path, {"states": fresh.states, "hypers": fresh.hypers}, defaults)
     try:
         # Through from_dict, so a field added to the config since the checkpoint reads as its default.
         stored = json.loads(json.dumps(to_dict(from_dict(meta["config"]))))
@@ -334,14 +343,23 @@ def _conditions(text: str) -> tuple[str, ...]:
     return names
 
 
-def _grid(text: str) -> tuple[float, ...]:
+def _numbers(text: str, smallest: float, strict: bool) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of numbers") from None
-    if not values or not all(math.isfinite(v) and v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"{text!r} must list positive numbers")
+    ok = all(math.isfinite(v) and (v > smallest if strict else v >= smallest) for v in values)
+    if not values or not ok:
+        raise argparse.ArgumentTypeError(f"{text!r} must list {'positive' if strict else 'non-negative'} numbers")
     return values
+
+
+def _grid(text: str) -> tuple[float, ...]:
+    return _numbers(text, 0.0, strict=True)
+
+
+def _non_negative_grid(text: str) -> tuple[float, ...]:
+    return _numbers(text, 0.0, strict=False)
 
 
 def _setting(text: str) -> tuple[str, str, object]:
@@ -390,6 +408,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="exploration bound after the anneal as a fraction of --noise (1 = no anneal), or a sweep grid",
     )
     p.add_argument(
+        "--noise-anneal-delay",
+        type=_non_negative_grid,
+        metavar="TRIALS",
+        help="trials from the first full field to the start of the anneal, or a comma-separated sweep grid",
+    )
+    p.add_argument(
+        "--noise-anneal-trials",
+        type=_grid,
+        metavar="TRIALS",
+        help="length of the anneal in trials, or a comma-separated sweep grid",
+    )
+    p.add_argument(
         "--keep-every",
         type=_non_negative_int,
         metavar="CHUNKS",
@@ -432,6 +462,8 @@ def _overrides(args) -> dict:
         "noise": "noise_grid",
         "lam": "lam_grid",
         "noise_final_ratio": "noise_final_ratio_grid",
+        "noise_anneal_delay": "noise_anneal_delay_grid",
+        "noise_anneal_trials": "noise_anneal_trials_grid",
         "keep_every": "keep_every",
     }
     return {field: getattr(args, arg) for arg, field in names.items() if getattr(args, arg) is not None}

@@ -13,11 +13,11 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from reach_jax import arm, checkpoint, evaluate, network, sensor, task, train
+from reach_jax import arm, checkpoint, claims, episodes, evaluate, network, sensor, task, train
 from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config, TrainConfig, to_json
 
 CFG = Config()
-N_STEPS = evaluate.n_steps(CFG)
+N_STEPS = episodes.n_steps(CFG)
 PAST = slice(CFG.sensor.n_cells**2 + 40, None)  # the 60 one-step-before inputs (encoding layout)
 
 
@@ -56,8 +56,10 @@ def run_policy(policy, params, masks=None, starts=None, targets=None):
         starts, targets = evaluate.test_pairs(CFG)
     params = jnp.asarray(params)
     masks = jnp.ones((params.shape[0], 125)) if masks is None else masks
-    return evaluate.Episode(
-        *jax.device_get(evaluate.evaluate(policy, params, masks, evaluate.test_fields(CFG), starts, targets, CFG))
+    return episodes.Episode(
+        *jax.device_get(
+            episodes.run_episodes(policy, params, masks, evaluate.test_fields(CFG), starts, targets, CFG)[0]
+        )
     )
 
 
@@ -103,7 +105,7 @@ def test_corner_pairs_join_the_four_corner_cell_centres():
 
 def test_pd_controller_succeeds_on_every_pair_in_both_tests():
     ep = run_policy(pd_policy, [PD_GAINS])
-    assert np.all(ep.outcome == evaluate.SUCCESS)
+    assert np.all(ep.outcome == episodes.SUCCESS)
     assert np.all(ep.steps < N_STEPS)
     starts, targets = evaluate.test_pairs(CFG)
     idx = ep.steps[..., None, None]
@@ -119,7 +121,7 @@ def test_pd_controller_succeeds_on_every_pair_in_both_tests():
 
 def test_controller_driving_a_joint_past_its_limit_is_out():
     ep = run_policy(limit_policy, [0.0])
-    assert np.all(ep.outcome == evaluate.OUT)
+    assert np.all(ep.outcome == episodes.OUT)
     assert np.all(ep.steps < N_STEPS)
     table = evaluate.count(ep.outcome, ep.steps, CFG)
     assert (table["success"], table["out"], table["fail"]) == (0, ep.outcome.size, 0)
@@ -128,7 +130,7 @@ def test_controller_driving_a_joint_past_its_limit_is_out():
 
 def test_zero_torque_fails_at_exactly_4_s():
     ep = run_policy(zero_policy, [0.0])
-    assert np.all(ep.outcome == evaluate.FAIL)
+    assert np.all(ep.outcome == episodes.FAIL)
     assert np.all(ep.steps == N_STEPS)
     assert np.all(evaluate.trial_times(ep.outcome, ep.steps, CFG) == 4.0)
     assert evaluate.count(ep.outcome, ep.steps, CFG)["mean_time_s"] == 4.0
@@ -143,7 +145,7 @@ def test_counts_are_per_pair_and_summed_over_a_conditions_networks():
     # Network 0 reaches only left targets; network 1 has zero gains and never moves.
     ep = run_policy(left_pd_policy, [PD_GAINS, (0.0, 0.0)])
     learners = [("none", 0), ("none", 1)]
-    table = evaluate.table2(ep.outcome, ep.steps, learners, CFG)
+    table = evaluate.table2(ep.outcome, ep.steps, learners, [0, 0], CFG)
     assert table["pairs_per_network"] == 1040
     rows = {(r["learning"], r["test"]): r for r in table["rows"]}
     assert set(rows) == {("none", t) for t in TEST_CONDITIONS}
@@ -158,7 +160,7 @@ def test_counts_are_per_pair_and_summed_over_a_conditions_networks():
 
 def test_mean_time_counts_out_and_fail_as_max_time():
     dt, cap = CFG.arm.dt, CFG.eval.max_time
-    outcome = np.array([evaluate.SUCCESS, evaluate.OUT, evaluate.FAIL, evaluate.SUCCESS])
+    outcome = np.array([episodes.SUCCESS, episodes.OUT, episodes.FAIL, episodes.SUCCESS])
     steps = np.array([10, 5, N_STEPS, 50])
     np.testing.assert_allclose(evaluate.trial_times(outcome, steps, CFG), [10 * dt, cap, cap, 50 * dt])
     got = evaluate.count(outcome, steps, CFG)
@@ -167,9 +169,9 @@ def test_mean_time_counts_out_and_fail_as_max_time():
 
     # Three networks, two learning conditions: rows sum the networks of a condition.
     out3 = np.broadcast_to(outcome, (3, 2, 4)).copy()
-    out3[2] = evaluate.SUCCESS
+    out3[2] = episodes.SUCCESS
     steps3 = np.broadcast_to(steps, (3, 2, 4))
-    table = evaluate.table2(out3, steps3, [("none", 0), ("none", 1), ("viscous", 0)], CFG)
+    table = evaluate.table2(out3, steps3, [("none", 0), ("none", 1), ("viscous", 0)], [0, 0, 0], CFG)
     rows = {(r["learning"], r["test"]): r for r in table["rows"]}
     assert [(r["learning"], r["test"]) for r in table["rows"]] == [
         (c, t) for c in ("none", "viscous") for t in TEST_CONDITIONS
@@ -191,7 +193,7 @@ def test_network_policy_is_the_noise_free_actor():
         jax.random.PRNGKey(3), dataclasses.replace(CFG, network=dataclasses.replace(CFG.network, output_init=1.0))
     )
     x = jax.random.uniform(jax.random.PRNGKey(4), (125,))
-    obs = evaluate.Obs(
+    obs = episodes.Obs(
         x=x,
         arm=jnp.zeros(4),
         hand=jnp.zeros(2),
@@ -200,7 +202,7 @@ def test_network_policy_is_the_noise_free_actor():
         target=jnp.zeros(2),
         t=jnp.array(0),
     )
-    got = evaluate.network_policy(CFG)(params, obs)
+    got = episodes.network_policy(CFG)(params, obs)
     want = network.torque(network.apply(params, x, CFG)[1:], jnp.zeros(2), CFG)
     np.testing.assert_allclose(got, want, rtol=1e-6)
     assert not np.allclose(got, 0.0)
@@ -211,7 +213,7 @@ def test_learning_condition_mask_reaches_the_policy():
         [task.make_condition("random", CFG).input_mask, task.make_condition("random_nopast", CFG).input_mask]
     )
     ep = run_policy(past_policy, [0.0, 0.0], masks=masks)
-    assert np.all(ep.outcome[1] == evaluate.FAIL)  # no past inputs: no torque, no movement
+    assert np.all(ep.outcome[1] == episodes.FAIL)  # no past inputs: no torque, no movement
     assert np.ptp(ep.hand[1], axis=-2).max() < 1e-6
     assert np.ptp(ep.hand[0], axis=-2).max() > 1e-3  # the same policy moves the arm when it sees them
 
@@ -267,7 +269,7 @@ def test_quality_measures_on_known_profiles():
 def test_minimum_jerk_yardstick_is_straight_single_peaked_and_reaches_every_target():
     starts, targets = evaluate.test_pairs(CFG)
     ep = evaluate.minimum_jerk_episodes(starts, targets, CFG)
-    assert np.all(ep.outcome == evaluate.SUCCESS)
+    assert np.all(ep.outcome == episodes.SUCCESS)
     q = evaluate.movement_quality(ep, starts, targets, CFG)
     assert q["successful"] == 1040
     assert q["straightness"]["mean"] < 1e-9
@@ -331,13 +333,13 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
         assert r["success"] * CFG.arm.dt <= r["mean_time_s"] * r["networks"] * 1040 + 1e-9
     assert len(t2["per_network"]) == networks * len(TEST_CONDITIONS)
     for r in t2["per_network"]:
-        assert {"learner", "learning", "seed", "test", "success", "out", "fail", "mean_time_s"} <= set(r)
+        assert {"learner", "learning", "seed", "recipe", "test", "success", "out", "fail", "mean_time_s"} <= set(r)
         assert r["success"] + r["out"] + r["fail"] == 1040
 
     md = (out / "table2.md").read_text()
-    for s, o, f, t in evaluate.PAPER_TABLE2.values():
+    for s, o, f, t in claims.PAPER_TABLE2.values():
         assert f"{s}-{o}-{f} ({t:.3g} s)" in md
-    for r in t2["rows"]:
+    for r in t2["first_two"]:
         assert f"{r['success']}-{r['out']}-{r['fail']} ({r['mean_time_s']:.3g} s)" in md
 
     after = json.loads((out / "aftereffect.json").read_text())

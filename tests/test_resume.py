@@ -115,6 +115,32 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(u
         np.testing.assert_array_equal(arrays[k], want[k], err_msg=k)
 
 
+def test_a_checkpoint_from_before_a_new_hyperparameter_resumes_it_from_the_config(uninterrupted, tmp_path):
+    out = copy_run(uninterrupted, tmp_path / "run")
+    *_, older, newest = checkpoint.list_checkpoints(out)
+    newest.unlink()
+    # Written before the anneal delay was a per-learner hyperparameter: the checkpoint lacks its array.
+    with np.load(older) as data:
+        arrays = {k: data[k] for k in data.files if k != "['hypers'].noise_anneal_delay"}
+    assert len(arrays) < len(np.load(older).files)
+    np.savez(older, **arrays)
+    assert train.main(["--resume", str(out), "--quiet"]) == 0
+    name, got = final_arrays(out)
+    want_name, want = final_arrays(uninterrupted)
+    assert name == want_name
+    for k in want:
+        np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+
+
+def test_snapshots_are_kept_every_n_chunks(tmp_path):
+    out = tmp_path / "run"
+    assert train.main([*ARGV, "--keep-every", "3", "--out", str(out), "--quiet"]) == 0
+    chunks = [checkpoint.checkpoint_chunk(p) for p in checkpoint.list_checkpoints(out)]
+    last = max(chunks)
+    assert last > 7
+    assert chunks == sorted({c for c in range(last + 1) if c % 3 == 0} | {last - 1, last})
+
+
 def test_metrics_past_the_checkpoint_and_torn_lines_are_dropped_on_resume(tmp_path):
     out = tmp_path / "run"
     argv = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "100"]
@@ -308,10 +334,10 @@ def test_error_text_stays_on_one_line_and_escaping_is_idempotent(text):
     assert error_line("prog", text).count("\n") == 1
 
 
-@pytest.mark.parametrize("field", ["noise", "noise_final_ratio", "noise_anneal_trials"])
+@pytest.mark.parametrize("field", ["noise", "noise_final_ratio", "noise_anneal_delay", "noise_anneal_trials"])
 def test_negative_exploration_settings_are_rejected(field):
     data = json.loads(json.dumps(to_dict(Config())))
-    data["learner"][field] = -1 if field == "noise_anneal_trials" else -0.5
+    data["learner"][field] = -1 if field.startswith("noise_anneal") else -0.5
     with pytest.raises(ValueError, match=f"learner.{field}: must not be negative"):
         from_dict(data)
 

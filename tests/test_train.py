@@ -152,13 +152,18 @@ def test_draws_do_not_depend_on_how_steps_are_split():
 
 def test_exploration_anneals_once_the_curriculum_is_full():
     lc = LearnerConfig(noise=0.2, noise_final_ratio=0.5, noise_anneal_trials=1000)
-    ratio = jnp.asarray(lc.noise_final_ratio)
-    bound = jax.jit(lambda t, f: learner.exploration_bound(jnp.asarray(lc.noise), ratio, t, f, lc))
+    hyper = rollout.default_hyper(dataclasses.replace(CFG, learner=lc))
+    bound = jax.jit(lambda t, f, h=hyper: rollout.exploration_bound(h, t, f))
     assert float(bound(5000, -1)) == pytest.approx(0.2)  # curriculum not full yet: no anneal, however long
     assert float(bound(100, 100)) == pytest.approx(0.2)
     assert float(bound(600, 100)) == pytest.approx(0.15)
     assert float(bound(1100, 100)) == pytest.approx(0.1)
     assert float(bound(10**6, 100)) == pytest.approx(0.1)
+    # With a delay the anneal starts that many trials after the field was first full.
+    delayed = hyper.replace(noise_anneal_delay=jnp.asarray(2000.0))
+    assert float(bound(2100, 100, delayed)) == pytest.approx(0.2)
+    assert float(bound(2600, 100, delayed)) == pytest.approx(0.15)
+    assert float(bound(3100, 100, delayed)) == pytest.approx(0.1)
 
     # In a rollout, full_at records the trial count when the distance first reaches its maximum, once.
     cfg = tiny()
@@ -262,6 +267,10 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         ["--hidden-pad", "0"],
         ["--hidden-pad", "1000"],
         ["--conditions", "none,sideways"],
+        ["--noise-final-ratio", "0"],
+        ["--noise-anneal-delay", "-1"],
+        ["--noise-anneal-trials", "0,1000"],
+        ["--keep-every", "-2"],
         ["--out", str(a_file)],
         ["--out", str(a_file / "sub")],
         ["--resume", str(tmp_path / "missing")],
@@ -274,6 +283,29 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         assert err.count("\n") == 1 and err.startswith("python -m reach_jax.train: error:"), (argv, err)
         assert "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
+    argv = ["--trials", "30", "--seeds", "2", "--conditions", "none", "--chunk-steps", "300", "--noise", "0.2"]
+    sweep = ["--noise-final-ratio", "0.5,1", "--noise-anneal-delay", "0,5", "--noise-anneal-trials", "10"]
+    cfg = train.parse([*argv, *sweep, "--out", "/nonexistent-parse-only"]).cfg
+    table, hypers = train.learner_table(cfg.train), train.learner_hypers(cfg)
+    assert len(table) == len(hypers) == 2 * 2 * 2  # ratios x delays x seeds
+    assert [s for _, s in table] == [0, 1] * 4
+    assert {(h["noise_final_ratio"], h["noise_anneal_delay"]) for h in hypers} == {(0.5, 0), (0.5, 5), (1, 0), (1, 5)}
+    batch = train.init_batch(cfg)
+    # Seed s starts from the same weights at every sweep point.
+    w = np.asarray(batch.states.params["params"]["Dense_0"]["kernel"])
+    np.testing.assert_array_equal(w[0], w[2])
+    assert not np.array_equal(w[0], w[1])
+    out = tmp_path / "run"
+    assert train.main([*argv, *sweep, "--out", str(out), "--quiet"]) == 0
+    rows = [json.loads(x) for x in (out / checkpoint.METRICS_FILE).read_text().splitlines()]
+    last = [r for r in rows if r["chunk"] == max(q["chunk"] for q in rows)]
+    for r in last:
+        assert r["noise_final_ratio"] in (0.5, 1) and r["noise_anneal_trials"] == 10
+        if r["noise_final_ratio"] == 1:
+            assert r["exploration"] == pytest.approx(0.2)
 
 
 def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):

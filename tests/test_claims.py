@@ -1,0 +1,201 @@
+"""Claims as computed verdicts: the t-intervals, and each claim's verdict on synthetic Table-2 numbers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from reach_jax import claims, stats
+from reach_jax.config import ClaimsConfig, Config
+
+CFG = Config()
+PAIRS = 1040
+SEEDS = 6
+
+
+def rows_from(cells: dict) -> list[dict]:
+    """Per-network rows from {(learning, test): (success %, out %, mean time s)}, with a small spread over seeds."""
+    rows = []
+    for k, ((learning, test), (success, out, time)) in enumerate(sorted(cells.items())):
+        # Independent spread per cell (fixed seed), so paired differences have a spread too.
+        noise = np.random.default_rng(k).normal(size=(2, SEEDS))
+        for seed in range(SEEDS):
+            s = round(min(100.0, success + 0.5 * noise[0, seed]) / 100 * PAIRS)
+            o = min(round(out / 100 * PAIRS), PAIRS - s)
+            rows.append(
+                {
+                    "learning": learning,
+                    "test": test,
+                    "seed": seed,
+                    "success": s,
+                    "out": o,
+                    "fail": PAIRS - s - o,
+                    "mean_time_s": time * (1 + 0.02 * noise[1, seed]),
+                }
+            )
+    return rows
+
+
+def paper_like() -> dict:
+    """Every cell at the paper's per-network values."""
+    out = {}
+    for key in claims.PAPER_TABLE2:
+        cell = claims.paper_cell(*key)
+        out[key] = (100 * cell["success"], 100 * cell["out"], cell["mean_time_s"])
+    return out
+
+
+AFTER_PAPER = {
+    "fraction_b_with_force": 1.0,
+    "fraction_c_against_force": 0.9,
+    "mean_pull_b_to_force_deg": 30.0,
+    "angle_deg": {"mean": 90.0, "low": 80.0, "high": 100.0, "n": SEEDS},
+}
+
+
+def verdicts(cells: dict, after=AFTER_PAPER) -> dict:
+    result = claims.recipe_claims(claims.Cells(rows_from(cells), PAIRS), after, CFG)
+    return {c["claim"]: c for c in result}
+
+
+def test_t_quantiles_and_intervals():
+    # Textbook two-sided 95% values of Student's t.
+    for df, value in [(1, 12.706), (2, 4.303), (7, 2.365), (30, 2.042)]:
+        assert stats.t_quantile(0.975, df) == pytest.approx(value, abs=1e-3)
+    assert stats.t_quantile(0.5, 5) == pytest.approx(0.0, abs=1e-9)
+    assert stats.t_cdf(stats.t_quantile(0.9, 3), 3) == pytest.approx(0.9, abs=1e-10)
+    x = np.array([1.0, 2.0, 3.0, 4.0])
+    ci = stats.mean_ci(x)
+    half = stats.t_quantile(0.975, 3) * x.std(ddof=1) / 2.0
+    assert (ci["mean"], ci["low"], ci["high"], ci["n"]) == pytest.approx((2.5, 2.5 - half, 2.5 + half, 4))
+    assert stats.mean_ci([3.0])["low"] is None and not stats.above(stats.mean_ci([3.0]), 0.0)
+    assert stats.paired_ci([3, 4, 5], [1, 1, 1])["mean"] == pytest.approx(3.0)
+    assert stats.ratio_ci([2, 2, 2], [1, 1, 1])["mean"] == pytest.approx(2.0)
+    assert stats.ratio_ci([2, 4, 8], [1, 1, 1])["mean"] == pytest.approx(4.0)  # geometric mean
+    # Coverage: about 95% of intervals from normal samples of 8 contain the true mean.
+    rng = np.random.default_rng(0)
+    inside = 0
+    for _ in range(2000):
+        ci = stats.mean_ci(rng.normal(1.0, 2.0, 8))
+        inside += ci["low"] <= 1.0 <= ci["high"]
+    assert 0.93 < inside / 2000 < 0.97
+
+
+def test_paper_numbers_make_every_claim_hold_and_every_cell_near():
+    got = verdicts(paper_like())
+    assert [got[k]["verdict"] for k in range(1, 6)] == [claims.HOLDS] * 5
+    cells = claims.table_cells(claims.Cells(rows_from(paper_like()), PAIRS), CFG.claims)
+    assert len(cells) == 8 and all(all(c["near_paper"].values()) for c in cells)
+    md = claims.claims_markdown(
+        {
+            "recipes": [
+                {
+                    "hypers": {"noise": 0.2},
+                    "level": 0.95,
+                    "networks_per_condition": SEEDS,
+                    "claims": list(got.values()),
+                    "cells": cells,
+                    "impedance": [],
+                    "curriculum": {"learners": [], "judged": 0, "all_stable": False},
+                }
+            ]
+        },
+        "synthetic",
+    )
+    assert md.count("**holds**") == 5 and "8 of 8 cells" in md
+
+
+def test_a_robust_no_field_network_fails_claim_2_and_4():
+    cells = paper_like()
+    cells[("none", "viscous")] = cells[("none", "none")]  # the field does not hurt
+    got = verdicts(cells)
+    assert got[2]["verdict"] == claims.FAILS
+    # Random-force networks now lose more to the field than no-field networks do.
+    assert got[4]["verdict"] == claims.PARTLY and "costs random-force networks less: no" in got[4]["why"]
+    near = {
+        (c["learning"], c["test"]): c["near_paper"]
+        for c in claims.table_cells(claims.Cells(rows_from(cells), PAIRS), CFG.claims)
+    }
+    assert not near[("none", "viscous")]["success"] and near[("none", "none")]["success"]
+
+
+def test_a_small_significant_effect_holds_only_in_part():
+    cells = paper_like()
+    cells[("none", "viscous")] = (92.0, 3.0, 0.55)  # significant, but a sixth of the paper's drop
+    got = verdicts(cells)
+    assert got[2]["verdict"] == claims.PARTLY
+    assert got[2]["numbers"]["success_change"]["high"] < 0
+    # The same numbers with paths pulled against the force: no claim at all.
+    against = {**AFTER_PAPER, "fraction_b_with_force": 0.2}
+    assert verdicts(cells, against)[2]["verdict"] == claims.FAILS
+
+
+def test_aftereffect_in_time_only_is_partial():
+    cells = paper_like()
+    vv = cells[("viscous", "viscous")]
+    cells[("viscous", "none")] = (vv[0] + 1.0, vv[1], 1.7 * vv[2])  # no loss of success, but slower
+    got = verdicts(cells)
+    assert got[3]["verdict"] == claims.PARTLY and "time only" in got[3]["why"]
+    cells[("viscous", "none")] = vv  # no after-effect at all
+    assert verdicts(cells)[3]["verdict"] == claims.FAILS
+
+
+def test_claim_5_needs_the_field_to_cost_the_no_past_networks_more():
+    cells = paper_like()
+    # No-past networks worse under the field, but equally worse without it.
+    r_none, r_field = cells[("random", "none")], cells[("random", "viscous")]
+    cells[("random_nopast", "none")] = (r_none[0] - 20, 0.0, 1.0)
+    cells[("random_nopast", "viscous")] = (r_field[0] - 20, 0.0, 1.2)
+    got = verdicts(cells)
+    assert got[5]["verdict"] == claims.PARTLY
+    cells[("random_nopast", "viscous")] = r_field
+    cells[("random_nopast", "none")] = r_none
+    assert verdicts(cells)[5]["verdict"] == claims.FAILS
+
+
+def test_claim_1_fails_when_a_matched_condition_is_poor():
+    cells = paper_like()
+    cells[("viscous", "viscous")] = (80.0, 5.0, 1.0)
+    got = verdicts(cells)
+    assert got[1]["verdict"] == claims.PARTLY
+    cells[("none", "none")] = (70.0, 5.0, 1.0)
+    assert verdicts(cells)[1]["verdict"] == claims.FAILS
+
+
+def test_claims_need_their_conditions():
+    only_none = {k: v for k, v in paper_like().items() if k[0] == "none"}
+    assert verdicts(only_none) == {}
+    two = {k: v for k, v in paper_like().items() if k[0] in ("none", "viscous")}
+    assert sorted(verdicts(two)) == [1, 2, 3]
+
+
+def test_size_rule_uses_logs_for_ratios():
+    c = ClaimsConfig(size_fraction=0.5)
+    assert claims._large_enough(math.sqrt(6.27) + 0.01, 6.27, c, log=True)
+    assert not claims._large_enough(math.sqrt(6.27) - 0.01, 6.27, c, log=True)
+    assert claims._large_enough(-0.25, -0.448, c) and not claims._large_enough(-0.2, -0.448, c)
+    assert not claims._large_enough(0.3, -0.448, c)  # the wrong direction is never large enough
+
+
+def test_curriculum_stability_counts_setbacks_in_the_tail_only():
+    full = CFG.sensor.n_cells * CFG.sensor.cell_size
+    trials = 1000
+    metrics = []
+    for chunk in range(1, 101):
+        t = chunk * 10
+        early_dip = 0.5 * full if chunk < 50 else full  # learner 0: setbacks only before the tail
+        late_dip = 0.5 * full if chunk in (90, 91) else full  # learner 1: two setbacks of 20 tail chunks
+        metrics += [
+            {"learner": 0, "trials": t, "chunk_trials": 10, "distance_m": early_dip},
+            {"learner": 1, "trials": t, "chunk_trials": 10, "distance_m": late_dip},
+            {"learner": 2, "trials": min(t, 850), "chunk_trials": 10 if t <= 850 else 0, "distance_m": full},
+        ]
+    got = claims.curriculum_stability(metrics, [0, 1, 2], trials, CFG)
+    per = {p["learner"]: p for p in got["learners"]}
+    assert per[0]["tail_chunks"] == 20 and per[0]["setback_chunks"] == 0 and per[0]["stable"]
+    assert per[1]["setback_chunks"] == 2 and per[1]["setback_fraction"] == pytest.approx(0.1) and not per[1]["stable"]
+    assert per[2]["tail_chunks"] == 5 and per[2]["stable"]  # chunks after the learner stopped do not count
+    assert not got["all_stable"]
+    assert claims.curriculum_stability(metrics, [0, 2], trials, CFG)["all_stable"]
