@@ -80,7 +80,7 @@ def hand_velocity(state: jax.Array, cfg: ArmConfig) -> jax.Array:
 
 
 def inverse_kinematics(hand: jax.Array, cfg: ArmConfig) -> jax.Array:
-    """(2,) hand position [m] -> (2,) joint angles [rad] with theta2 in (0, pi) (SPEC §2)."""
+    """(2,) hand position [m] -> (2,) joint angles [rad] with theta2 in (0, pi) (model §2)."""
     l1, l2 = cfg.length
     r2 = hand[0] ** 2 + hand[1] ** 2
     c2 = jnp.clip((r2 - l1**2 - l2**2) / (2 * l1 * l2), -1.0, 1.0)
@@ -123,7 +123,7 @@ def rk4(state: jax.Array, tau: jax.Array, field: jax.Array, force: jax.Array, cf
 
 
 def elbow_stop(state: jax.Array, cfg: ArmConfig) -> jax.Array:
-    """Hard stop at theta2 = cfg.theta2_stop: clamp the angle, zero any outward velocity (SPEC §1)."""
+    """Hard stop at theta2 = cfg.theta2_stop: clamp the angle, zero any outward velocity (model §1)."""
     past = state[1] >= cfg.theta2_stop
     theta2 = jnp.where(past, cfg.theta2_stop, state[1])
     omega2 = jnp.where(past, jnp.minimum(state[3], 0.0), state[3])

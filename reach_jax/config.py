@@ -1,7 +1,8 @@
 """Every constant of the model, with the paper's values as defaults.
 
 Units: lengths [m], masses [kg], times [s], angles [rad], torques [N m], forces [N].
-Each field names the paper's equation or table, or `SPEC §n` for a choice the paper leaves open.
+Each field names the paper's equation or table, or `model §n`, a section of docs/model.md, for a choice the
+paper leaves open; §11 there gives the evidence behind each value.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ CONFIG_VERSION = 1
 class ArmConfig:
     """Two-link arm of eq. 4-5 and Table 1."""
 
-    mass: tuple[float, float] = (2.0, 2.0)  # M_i [kg], Table 1 (shared by both links, SPEC §1)
+    mass: tuple[float, float] = (2.0, 2.0)  # M_i [kg], Table 1 (shared by both links, model §1)
     length: tuple[float, float] = (0.3, 0.3)  # l_i [m], Table 1
     com_fraction: float = 0.5  # s_i = l_i / 2, Table 1
     inertia_factor: float = 1.0 / 3.0  # I_i = M_i l_i^2 / 3 about the joint, Table 1
@@ -27,21 +28,21 @@ class ArmConfig:
     dt: float = 0.02  # RK4 step [s], section 4.1
     theta1_range: tuple[float, float] = (0.0, math.pi / 2)  # leaving it is "out", section 4.2
     theta2_min: float = 0.0  # below it is "out", section 4.2
-    theta2_stop: float = math.pi  # hard stop, not "out" (SPEC §1 choice)
+    theta2_stop: float = math.pi  # hard stop, not "out" (model §1 choice)
 
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """5x5 area-ratio visual sensor (section 4.2, SPEC §2)."""
+    """5x5 area-ratio visual sensor (section 4.2, model §2)."""
 
     n_cells: int = 5  # cells per side, section 4.2
-    cell_size: float = 0.04  # [m], also the hand and target square side (SPEC §2 choice)
-    centre: tuple[float, float] = (-0.05, 0.37)  # field centre [m] in shoulder frame (SPEC §2 choice)
+    cell_size: float = 0.04  # [m], also the hand and target square side (model §2 choice)
+    centre: tuple[float, float] = (-0.05, 0.37)  # field centre [m] in shoulder frame (model §2 choice)
 
 
 @dataclass(frozen=True)
 class EncodingConfig:
-    """Localized (triangular) coding of joint signals (section 4.2, Fig. 3, SPEC §3)."""
+    """Localized (triangular) coding of joint signals (section 4.2, Fig. 3, model §3)."""
 
     theta_units: tuple[int, int] = (8, 12)  # units for theta1, theta2, section 4.2
     theta_ranges: tuple[tuple[float, float], tuple[float, float]] = (
@@ -50,32 +51,32 @@ class EncodingConfig:
     )  # [rad], section 4.2
     omega_units: int = 10  # units per joint velocity, section 4.2
     omega_range: float = math.pi  # velocities coded over [-range, range] [rad/s], section 4.2
-    tau_units: int = 10  # units per past torque over [-tau_max, tau_max] (SPEC §3 choice)
+    tau_units: int = 10  # units per past torque over [-tau_max, tau_max] (model §3 choice)
 
 
 @dataclass(frozen=True)
 class NetworkConfig:
-    """125-30-10-3 sigmoid network (section 4.2, SPEC §4)."""
+    """125-30-10-3 sigmoid network (section 4.2, model §4)."""
 
     hidden: tuple[int, int] = (30, 10)  # hidden layer widths, section 4.2
     n_out: int = 3  # critic + 2 actor outputs, section 4.2
-    hidden_init: float = 0.5  # hidden weights ~ U(-a, a) (SPEC §4, §11 choice)
-    output_init: float = 0.0  # output weights ~ U(-a, a); 0 starts critic and actor at 0 (SPEC §11 choice)
-    use_bias: bool = True  # biases start at 0 (SPEC §4 choice)
+    hidden_init: float = 0.5  # hidden weights ~ U(-a, a) (model §4, §11 choice)
+    output_init: float = 0.0  # output weights ~ U(-a, a); 0 starts critic and actor at 0 (model §11 choice)
+    use_bias: bool = True  # biases start at 0 (model §4 choice)
 
 
 @dataclass(frozen=True)
 class LearnerConfig:
-    """TS actor-critic, eq. 1-3 (SPEC §5). Per-learner copies of lr, noise and lam allow sweeps."""
+    """TS actor-critic, eq. 1-3 (model §5). Per-learner copies of lr, noise and lam allow sweeps."""
 
     p_range: float = 0.8  # P_range of eq. 1
     reward_goal: float = 0.4  # reinforcement at the goal, section 4.2
     reward_out: float = -0.4  # reinforcement at a joint limit, section 4.2
-    lam: float = 0.999  # lambda of eq. 3 (SPEC §11 choice)
+    lam: float = 0.999  # lambda of eq. 3 (model §11 choice)
     n_max_init: float = 100.0  # N_max[0] [steps] (choice)
-    lr: float = 1.0  # SGD learning rate on squared error (SPEC §11 choice)
-    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (SPEC §11 choice)
-    noise_final_ratio: float = 1.0  # bound after the anneal / noise; 1 = no anneal (SPEC §5 leaves decay open)
+    lr: float = 1.0  # SGD learning rate on squared error (model §11 choice)
+    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (model §11 choice)
+    noise_final_ratio: float = 1.0  # bound after the anneal / noise; 1 = no anneal (model §5, §11 choice)
     noise_anneal_delay: int = 0  # trials from the first full-field trial to the start of the anneal (choice)
     noise_anneal_trials: int = 300_000  # length of the linear anneal to noise * noise_final_ratio [trials] (choice)
     critic_floor: float = -0.3  # non-terminal critic targets never go below it, so "out" is always worse (choice)
@@ -83,23 +84,23 @@ class LearnerConfig:
 
 @dataclass(frozen=True)
 class TaskConfig:
-    """Goal, curriculum, target drift and trial cap (section 4.2, SPEC §5)."""
+    """Goal, curriculum, target drift and trial cap (section 4.2, model §5)."""
 
     goal_half_width_cells: float = 1.0  # goal square side is 2 cells, section 4.2 / Fig. 4
     goal_speed: float = 0.1  # hand speed must be below it [m/s], section 4.2
-    curriculum_init_cells: float = 1.6  # initial max start-target L-inf distance [cells] (SPEC §11 choice)
-    curriculum_step: float = 0.0004  # staircase step [m] (SPEC §11 choice)
+    curriculum_init_cells: float = 1.6  # initial max start-target L-inf distance [cells] (model §11 choice)
+    curriculum_step: float = 0.0004  # staircase step [m] (model §11 choice)
     target_candidates: int = 8  # draws to find a target not touched at the start; all fail < 0.1% (choice)
-    drift_after: float = 1.0  # target starts drifting after this long in a trial [s] (SPEC §11 choice)
-    drift_per_step: float = 0.002  # drift toward the hand [m/step] (SPEC §11 choice)
-    max_trial_time: float = 10.0  # safety cap on a learning trial [s] (SPEC §5 choice)
+    drift_after: float = 1.0  # target starts drifting after this long in a trial [s] (model §11 choice)
+    drift_per_step: float = 0.002  # drift toward the hand [m/step] (model §11 choice)
+    max_trial_time: float = 10.0  # safety cap on a learning trial [s] (model §5 choice)
     drift_neutral_when_full: bool = True  # once the field was first full, a drift-aided success leaves the
     # curriculum unchanged instead of shrinking it (choice; README "The curriculum")
 
 
 @dataclass(frozen=True)
 class ForceConfig:
-    """External hand forces (section 4.3, SPEC §6)."""
+    """External hand forces (section 4.3, model §6)."""
 
     viscous: tuple[tuple[float, float], tuple[float, float]] = (
         (-10.1, -11.2),
@@ -110,7 +111,7 @@ class ForceConfig:
 
 @dataclass(frozen=True)
 class EvalConfig:
-    """Table 2 test protocol (section 4.4, SPEC §8)."""
+    """Table 2 test protocol (section 4.4, model §8)."""
 
     lattice: int = 8  # lattice points per side, section 4.4
     max_time: float = 4.0  # a test trial fails after this long [s], section 4.4

@@ -1,4 +1,4 @@
-"""Localized coding of joint signals and assembly of the 125 network inputs (section 4.2, SPEC §3).
+"""Localized coding of joint signals and assembly of the 125 network inputs (section 4.2, model §3).
 
 Units: angles [rad], velocities [rad/s], torques [N m]; every coded unit is in [0, 1].
 Input layout (paper sizes): 25 visual cells | theta1 (8), theta2 (12), omega1 (10), omega2 (10) now |
@@ -61,11 +61,6 @@ def _codes(state: jax.Array, prev_state: jax.Array, prev_tau: jax.Array, cfg: Co
         (prev_tau[0], -t1, t1, n),
         (prev_tau[1], -t2, t2, n),
     ]
-
-
-def encode_joints(theta: jax.Array, omega: jax.Array, cfg: Config) -> jax.Array:
-    """(2,) angles [rad] and (2,) velocities [rad/s] -> (40,) coded joint state for the paper's sizes."""
-    return jnp.concatenate([localize(*code) for code in _joint_codes(theta, omega, cfg)])
 
 
 def encode(

@@ -1,4 +1,4 @@
-"""Table-2 test protocol, Fig. 4-5 movements, after-effect and movement quality (section 4.4, SPEC §8-10).
+"""Table-2 test protocol, Fig. 4-5 movements, after-effect and movement quality (section 4.4, model §8-10).
 
 `python -m reach_jax.evaluate RUN_DIR` loads the newest checkpoint of a run and writes RUN_DIR/eval/:
 table2.json, table2.md, fig4.png, fig5.png, aftereffect.json, quality.json and learning_curves.png.
@@ -120,7 +120,7 @@ def test_fields(cfg: Config) -> jax.Array:
 
 
 def trial_times(outcome: np.ndarray, steps: np.ndarray, cfg: Config) -> np.ndarray:
-    """Reaching time per episode [s]: steps x dt for a success, cfg.eval.max_time for out and fail (SPEC §8)."""
+    """Reaching time per episode [s]: steps x dt for a success, cfg.eval.max_time for out and fail (model §8)."""
     return np.where(np.asarray(outcome) == SUCCESS, np.asarray(steps) * cfg.arm.dt, cfg.eval.max_time)
 
 
@@ -294,7 +294,7 @@ def aftereffect(
     2-D vector, reported as a direction [deg, counter-clockwise from +x] and a size [m]; the angle between
     the pulls of (b) and (c) of the same movement lies in [0, 180] deg. The mean angle is the mean of the
     per-movement angles; `mean_direction_deg` is the direction of each panel's mean unit pull vector.
-    For the classic sign test we also give SPEC §9's line measure: the signed largest perpendicular
+    For the classic sign test we also give model §9's line measure: the signed largest perpendicular
     deviation from the straight start-target line (+ = left of the direction of travel) in (b) and (c).
     The field's force on a movement is taken as field @ (target - start): the direction of F = B xdot on a
     straight movement, whatever its speed profile. A pull "with the force" is within 90 deg of it; the

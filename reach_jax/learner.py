@@ -1,4 +1,4 @@
-"""TS actor-critic learning: targets of eq. 1-2, N_max of eq. 3, and one backprop update (SPEC §5).
+"""TS actor-critic learning: targets of eq. 1-2, N_max of eq. 3, and one backprop update (model §5).
 
 Units: critic and actor values are network outputs in (-0.5, 0.5); N_max and trial lengths are steps.
 The update for the transition x(t-1) -> x(t) runs at step t, once p(t) is known. A trial's last

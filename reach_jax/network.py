@@ -1,4 +1,4 @@
-"""The 125-30-10-3 actor-critic network (section 4.2, SPEC §4), on flax.
+"""The 125-30-10-3 actor-critic network (section 4.2, model §4), on flax.
 
 Units: inputs are coded signals in [0, 1]; every neuron outputs f(u) = sigmoid(u) - 0.5 in (-0.5, 0.5).
 Output 0 is the critic p; outputs 1-2 are the actor m, mapped to torques [N m] by `torque`.

@@ -20,7 +20,7 @@ import numpy as np
 from reach_jax.config import CONDITIONS, ArmConfig, Config, LearnerConfig, SensorConfig
 
 # ---------------------------------------------------------------------------------------------------------------
-# Arm (eq. 4-5, SPEC §1)
+# Arm (eq. 4-5, model §1)
 # ---------------------------------------------------------------------------------------------------------------
 
 
@@ -146,7 +146,7 @@ def rk4(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
 
 
 def elbow_stop(state, cfg: ArmConfig) -> np.ndarray:
-    """Hard stop at theta2 = cfg.theta2_stop (SPEC §1 choice).
+    """Hard stop at theta2 = cfg.theta2_stop (model §1 choice).
 
     Args: state (4,).
     Returns: (4,) state.
@@ -189,7 +189,7 @@ def kinetic_energy(state, cfg: ArmConfig) -> float:
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Visual sensor (section 4.2, SPEC §2)
+# Visual sensor (section 4.2, model §2)
 # ---------------------------------------------------------------------------------------------------------------
 
 
@@ -242,7 +242,7 @@ def render(hand, target, cfg: SensorConfig) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Encoding (section 4.2, Fig. 3, SPEC §3)
+# Encoding (section 4.2, Fig. 3, model §3)
 # ---------------------------------------------------------------------------------------------------------------
 
 
@@ -321,7 +321,7 @@ def observe(state, prev_state, prev_tau, target, mask, cfg: Config) -> np.ndarra
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Network (section 4.2, SPEC §4)
+# Network (section 4.2, model §4)
 # ---------------------------------------------------------------------------------------------------------------
 
 
@@ -432,7 +432,7 @@ def torque(m, rnd, cfg: Config) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# TS learning (eq. 1-3, SPEC §5)
+# TS learning (eq. 1-3, model §5)
 # ---------------------------------------------------------------------------------------------------------------
 
 
@@ -489,7 +489,7 @@ def ts_update(layers, x_now, pending: Pending, n_max: float, lr: float, cfg: Con
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Task: conditions, placement, goal, drift, curriculum (SPEC §2, §5, §6)
+# Task: conditions, placement, goal, drift, curriculum (model §2, §5, §6)
 # ---------------------------------------------------------------------------------------------------------------
 
 

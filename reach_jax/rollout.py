@@ -1,4 +1,4 @@
-"""One learner step and compiled chunks of steps, vmapped over learners (SPEC §5).
+"""One learner step and compiled chunks of steps, vmapped over learners (model §5).
 
 Units: arm state [rad, rad/s], torques [N m], positions [m], forces [N]; counts are steps or trials.
 A step: observe, forward pass, TS update on the previous input, act, RK4. Trials end at the goal, at a

@@ -1,4 +1,4 @@
-"""The 5x5 area-ratio visual sensor (section 4.2, SPEC §2).
+"""The 5x5 area-ratio visual sensor (section 4.2, model §2).
 
 Units: positions [m] in the shoulder frame; cell outputs are area fractions in [0, 1].
 Cells are indexed row-major, row 0 at the lowest y and column 0 at the lowest x.

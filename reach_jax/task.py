@@ -1,4 +1,4 @@
-"""The reaching task: conditions, trial sampling, goal test, target drift and curriculum (SPEC §2, §5, §6).
+"""The reaching task: conditions, trial sampling, goal test, target drift and curriculum (model §2, §5, §6).
 
 Units: positions and distances [m], speeds [m/s], forces [N], field matrices [N s/m], time [s].
 Randomness enters only through uniform draws in [0, 1) (`TrialDraws`), so a NumPy oracle can replay a run.

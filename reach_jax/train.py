@@ -34,7 +34,7 @@ from reach_jax.config import (
     to_json,
     tuplify,
 )
-from reach_jax.progress import Progress
+from reach_jax.progress import LearnerEta, Progress
 
 EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
 EXIT_NUMERICS = 3  # a learner went non-finite; the last good checkpoint is kept
@@ -167,6 +167,40 @@ def status_line(rows: list[dict]) -> str:
     return " ".join(f"{c} {np.mean(v):.2f}" for c, v in by_cond.items()) or "no trial ended yet"
 
 
+def chunk_members(trials: np.ndarray, budget: int) -> np.ndarray:
+    """Sorted indices of the learners that the next chunk runs.
+
+    Every unfinished learner, padded with finished ones (which stay frozen) up to the next power of two, or to
+    the whole batch: in the tail of a run the chunk costs about as many learners as are left, and only a few
+    batch sizes are ever compiled. A learner's steps do not depend on which others share its chunk.
+
+    Args:
+      trials: (L,) trials ended per learner.
+      budget: trials per learner.
+    """
+    left = np.flatnonzero(trials < budget)
+    if len(left) == 0:
+        return left
+    size = min(len(trials), 1 << (len(left) - 1).bit_length())
+    done = np.flatnonzero(trials >= budget)
+    return np.sort(np.concatenate([left, done[: size - len(left)]]))
+
+
+def merge_members(states, members: np.ndarray, ran):
+    """Host states of every learner after a chunk that ran only `members`: theirs from `ran`, the others as they
+    were but with zeroed chunk counters."""
+    states = states.replace(stats=jax.tree.map(np.zeros_like, states.stats))
+    if len(members) == len(np.asarray(states.trials)):
+        return jax.tree.map(np.asarray, ran)
+
+    def put(whole, part):
+        whole = np.array(whole)
+        whole[members] = part
+        return whole
+
+    return jax.tree.map(put, states, ran)
+
+
 def checkpoint_meta(cfg: Config) -> dict:
     """Identity of a run, stored in each checkpoint."""
     return {"config": to_dict(cfg)}
@@ -266,19 +300,41 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
     run_chunk = rollout.make_chunk(cfg, cfg.train.chunk_steps)
     total = cfg.train.trials * len(table)
     bar = Progress(total, "trials", stream=stream) if progress else None
+    eta = LearnerEta(cfg.train.trials)
     started = time.monotonic()
 
     def unfinished(states) -> bool:
         return int(np.min(np.asarray(states.trials))) < cfg.train.trials
 
-    running = run_chunk(batch.states, batch.conds, batch.hypers, budget) if unfinished(batch.states) else None
+    def dispatch(states, members, device_states=None):
+        """Start the next chunk on the learners `members`; `device_states`, if given, already holds exactly them."""
+        pick = lambda a: np.asarray(a)[members]  # noqa: E731
+        conds, hypers = batch.conds, batch.hypers
+        if len(members) < len(table):
+            conds, hypers = jax.tree.map(pick, conds), jax.tree.map(pick, hypers)
+        if device_states is None:
+            device_states = jax.tree.map(pick, states)
+        return run_chunk(device_states, conds, hypers, budget)
+
+    states = jax.device_get(batch.states)
+    members = chunk_members(np.asarray(states.trials), cfg.train.trials)
+    running = None
+    if unfinished(states):
+        running = dispatch(states, members, batch.states if len(members) == len(table) else None)
     while running is not None:
-        # Every learner on this process (an all-gather across hosts with --multihost), copied to the host.
-        states = jax.device_get(rollout.to_host(running))
+        # The chunk's learners on this process (an all-gather across hosts with --multihost), copied to the host,
+        # put back among the rest; learners outside the chunk ended no trial in it.
+        finished, running = running, None
+        states = merge_members(states, members, jax.device_get(rollout.to_host(finished)))
         chunk += 1
         ok = np.asarray(finite_learners(states))
         # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk.
-        running = run_chunk(running, batch.conds, batch.hypers, budget) if ok.all() and unfinished(states) else None
+        if ok.all() and unfinished(states):
+            following = chunk_members(np.asarray(states.trials), cfg.train.trials)
+            # The devices already hold the learners of the next chunk unless the batch shrinks.
+            reuse = finished if np.array_equal(following, members) else None
+            members = following
+            running = dispatch(states, members, reuse)
         if not ok.all():
             i = int(np.argmin(ok))
             cond, seed = table[i]
@@ -293,7 +349,8 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
             checkpoint.append_lines(run_dir / checkpoint.METRICS_FILE, [json.dumps(r) for r in rows])
             write_checkpoint(run_dir, chunk, batch, cfg)
         if bar:
-            bar.update(int(np.minimum(np.asarray(states.trials), cfg.train.trials).sum()), status_line(rows))
+            left = eta.update(states.trials, time.monotonic())
+            bar.update(int(np.minimum(np.asarray(states.trials), cfg.train.trials).sum()), status_line(rows), eta=left)
     if bar:
         bar.update(total, "done", force=True)
         bar.close()

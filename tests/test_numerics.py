@@ -128,7 +128,7 @@ def test_elbow_stop_and_limits_match_oracle():
     want = np.array([reference.elbow_stop(s, CFG.arm) for s in states])
     np.testing.assert_array_equal(np.asarray(stop_j(states)), want)  # pure selections: exact
     np.testing.assert_array_equal(np.asarray(out_j(states)), [reference.is_out(s, CFG.arm) for s in states])
-    assert want[0, 1] == stop and want[0, 3] == 0.0 and want[1, 3] == -1.0  # the oracle itself obeys SPEC §1
+    assert want[0, 1] == stop and want[0, 3] == 0.0 and want[1, 3] == -1.0  # the oracle itself obeys model §1
 
     # A full step that drives the elbow into the stop: RK4 then clamp, on both sides.
     tau = np.array([0.0, CFG.arm.tau_max[1]])
@@ -209,7 +209,7 @@ def test_localize_matches_oracle():
     want = np.array([reference.localize(x, lo, hi, n) for x in xs])
     # Two subtractions and a division per unit: a few eps.
     np.testing.assert_allclose(got, want, rtol=RTOL, atol=ATOL)
-    np.testing.assert_allclose(want.sum(axis=1), 1.0, atol=1e-12)  # activations sum to 1 (SPEC §3)
+    np.testing.assert_allclose(want.sum(axis=1), 1.0, atol=1e-12)  # activations sum to 1 (model §3)
     assert ((want > 0).sum(axis=1) <= 2).all()
 
 

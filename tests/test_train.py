@@ -308,6 +308,32 @@ def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
             assert r["exploration"] == pytest.approx(0.2)
 
 
+def test_chunk_members_shrink_to_the_unfinished_learners():
+    trials = np.array([10, 3, 10, 10, 2, 10, 10, 10])
+    np.testing.assert_array_equal(train.chunk_members(trials, 10), [1, 4])
+    np.testing.assert_array_equal(train.chunk_members(trials, 11), np.arange(8))
+    np.testing.assert_array_equal(train.chunk_members(np.array([1, 10, 1, 1, 10, 10]), 10), [0, 1, 2, 3])
+    assert len(train.chunk_members(np.full(5, 10), 10)) == 0
+
+
+def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
+    # Learners finish their trials in different chunks, so the batch shrinks in the tail; each learner must end
+    # exactly as it does when trained alone.
+    argv = ["--trials", "40", "--chunk-steps", "250", "--quiet"]
+    assert train.main([*argv, "--seeds", "3", "--conditions", "none,random", "--out", str(tmp_path / "all")]) == 0
+    rows = [json.loads(x) for x in (tmp_path / "all" / checkpoint.METRICS_FILE).read_text().splitlines()]
+    finish = {r["learner"]: r["chunk"] for r in rows if r["trials"] >= 40 and r["chunk_trials"] > 0}
+    assert len(set(finish.values())) > 1  # the tail ran with fewer learners
+    cfg = train.read_config(tmp_path / "all")
+    whole, _ = train.load_batch(tmp_path / "all", cfg)
+    assert train.main([*argv, "--seeds", "2", "--conditions", "random", "--out", str(tmp_path / "one")]) == 0
+    alone, _ = train.load_batch(tmp_path / "one", train.read_config(tmp_path / "one"))
+    for i in range(2):
+        got = jax.tree.map(lambda a, i=i: np.asarray(a)[3 + i], whole.states.replace(stats=None))
+        want = jax.tree.map(lambda a, i=i: np.asarray(a)[i], alone.states.replace(stats=None))
+        chex.assert_trees_all_equal(got, want)
+
+
 def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["--trials", "2e1", "--seeds", "1", "--conditions", "none,random_nopast", "--chunk-steps", "300"]
