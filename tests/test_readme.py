@@ -24,10 +24,10 @@ def test_readme_blocks_match_the_committed_files():
 
 def test_a_changed_file_is_caught(tmp_path, monkeypatch):
     tool = _tool()
-    (tmp_path / "r.md").write_text("# Title\n\n| a |\n")
+    (tmp_path / "r.md").write_text("# Title\n\n## Part\n\n| a |\n")
     monkeypatch.setattr(tool, "ROOT", tmp_path)
     text = "x\n<!-- include: r.md -->\nold\n<!-- end include -->\ny\n"
     assert tool.stale_blocks(text) == ["r.md"]
     fixed = tool.synced(text)
-    assert fixed == "x\n<!-- include: r.md -->\n**Title**\n\n| a |\n<!-- end include -->\ny\n"
+    assert fixed == "x\n<!-- include: r.md -->\n**Title**\n\n#### Part\n\n| a |\n<!-- end include -->\ny\n"
     assert tool.stale_blocks(fixed) == []

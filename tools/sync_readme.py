@@ -22,10 +22,12 @@ BLOCK = re.compile(r"(<!-- include: (?P<path>\S+) -->\n)(?P<body>.*?)(<!-- end i
 
 def _body(path: str) -> str:
     text = (ROOT / path).read_text()
-    # The files start with a level-1 title; inside the README it becomes a paragraph in bold.
+    # The files start with a level-1 title; inside the README it becomes a paragraph in bold, and their other
+    # headings sink two levels so that they nest under the README's section.
     lines = text.splitlines()
     if lines and lines[0].startswith("# "):
         lines[0] = f"**{lines[0][2:]}**"
+    lines = [f"##{line}" if line.startswith("#") else line for line in lines]
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
