@@ -23,7 +23,7 @@ from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from reach_jax import arm, encoding, learner, network, task
-from reach_jax.config import Config, n_inputs
+from reach_jax.config import Config, OneLineError, n_inputs
 
 # XLA:CPU hands small reductions to YNNPACK by default; for the per-learner 30x10 and 10x3 products that
 # made the step ~1.6x slower at 128 learners (benchmarks/throughput.py). Keep YNNPACK for real dots only.
@@ -48,16 +48,38 @@ def available_cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
-def configure_backend(devices: int | None = None, multihost: bool = False) -> None:
-    """Set up JAX before its first computation: CPU compiler options, host device count, multi-host.
+class Cluster(NamedTuple):
+    """How this process joins a multi-process run; a None field is left to jax's cluster auto-detection."""
+
+    coordinator: str | None  # HOST:PORT of the coordination service that process 0 starts
+    num_processes: int | None  # processes in the run
+    process_id: int | None  # this process, in [0, num_processes)
+    init_timeout: int = 300  # [s] to wait for every process to connect
+
+
+class ClusterError(OneLineError):
+    """This process could not join the other processes of a multi-process run."""
+
+
+class PeerLostError(OneLineError):
+    """A collective across processes failed: another process of the run stopped or is unreachable."""
+
+
+def first_line(exc: BaseException) -> str:
+    """The first non-empty line of an exception's message (XLA's runtime errors span many)."""
+    return next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+
+
+def configure_backend(devices: int | None = None, cluster: Cluster | None = None) -> None:
+    """Set up JAX before its first computation: CPU compiler options, host device count, multi-process run.
 
     Args:
       devices: on CPU, the number of host devices to expose (one per core is the useful maximum);
         None asks for one per available core when JAX has not started yet, and otherwise keeps what it has.
         Ignored by GPU/TPU backends, whose devices are physical.
-      multihost: join a multi-process run with `jax.distributed.initialize()`, which reads its coordinator,
-        process count and id from the cluster environment (SLURM, Open MPI, Cloud TPU) or from
-        JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID.
+      cluster: join a multi-process run with `jax.distributed.initialize`; its None fields come from the
+        cluster environment (SLURM, Open MPI, Cloud TPU). Raises ClusterError when they cannot be found.
+        A process that cannot reach the others within `init_timeout` is ended by jax itself (SIGABRT).
     """
     add_cpu_xla_flags()
     if devices is not None:
@@ -66,8 +88,19 @@ def configure_backend(devices: int | None = None, multihost: bool = False) -> No
         # Too late once JAX has computed (e.g. when called in-process); the default device then stays.
         with contextlib.suppress(RuntimeError):
             jax.config.update("jax_num_cpu_devices", available_cores())
-    if multihost:
-        jax.distributed.initialize()
+    if cluster is not None:
+        try:
+            jax.distributed.initialize(
+                cluster.coordinator,
+                cluster.num_processes,
+                cluster.process_id,
+                initialization_timeout=cluster.init_timeout,
+            )
+        except (ValueError, TypeError, RuntimeError) as exc:
+            hint = ""
+            if None in cluster[:3]:
+                hint = " (outside SLURM, Open MPI and Cloud TPU, give the coordinator, process count and process id)"
+            raise ClusterError(f"cannot join the multi-process run: {first_line(exc)}{hint}") from None
 
 
 @struct.dataclass
@@ -382,15 +415,32 @@ def narrow_hidden(state: LearnerState, cfg: Config) -> LearnerState:
     return state.replace(params=network.unpad_hidden(state.params, cfg), pending=state.pending._replace(u1=u1))
 
 
+def spread_devices(devices) -> list:
+    """devices reordered so that every leading slice spreads over the processes as evenly as it can.
+
+    The first device of each process, then the second of each, and so on; one process keeps its order.
+    """
+    seen: dict[int, int] = {}
+    ranked = []
+    for d in devices:
+        seen[d.process_index] = seen.get(d.process_index, -1) + 1
+        ranked.append(((seen[d.process_index], d.process_index), d))
+    return [d for _, d in sorted(ranked, key=lambda pair: pair[0])]
+
+
 def learner_mesh(n_learners: int, devices=None) -> Mesh:
     """1-D mesh ("learners") over the most devices that split n_learners evenly.
+
+    Across processes the mesh holds a device of every process, or is one device (each process then runs
+    the whole chunk itself): every process must own a slice to take part in the chunk and its gather.
 
     Args:
       n_learners: batch size.
       devices: devices to use (default: every device of every process, `jax.devices()`).
     """
-    devices = list(jax.devices() if devices is None else devices)
-    n = max(d for d in range(1, len(devices) + 1) if n_learners % d == 0)
+    devices = spread_devices(jax.devices() if devices is None else devices)
+    n_proc = len({d.process_index for d in devices})
+    n = max(d for d in range(1, len(devices) + 1) if n_learners % d == 0 and (d == 1 or d >= n_proc))
     return Mesh(np.array(devices[:n]), ("learners",))
 
 
@@ -408,11 +458,30 @@ def shard_learners(tree, mesh: Mesh):
     return jax.tree.map(place, tree)
 
 
+def gather_processes(tree):
+    """process_allgather(tree, tiled=True) that raises PeerLostError when another process is gone.
+
+    Every process must call it at the same point of the program.
+    """
+    try:
+        return multihost_utils.process_allgather(tree, tiled=True)
+    # A broken gloo connection comes as ValueError ("UNKNOWN: Gloo AllGather failed"), others as JaxRuntimeError.
+    except (ValueError, RuntimeError) as exc:
+        raise PeerLostError(f"lost another process of the multi-process run: {first_line(exc)}") from None
+
+
 def to_host(tree):
-    """tree with every array whole on this process: itself on one host, an all-gather across hosts."""
+    """tree with every array whole on this process: arrays split across processes are all-gathered.
+
+    Across processes it always meets the others, also when nothing is split (a chunk on one device runs
+    whole on every process), so that a lost process shows as PeerLostError at the next chunk.
+    """
     if jax.process_count() == 1:
         return tree
-    return jax.tree.map(jnp.asarray, multihost_utils.process_allgather(tree, tiled=True))
+    if all(a.is_fully_addressable for a in jax.tree.leaves(tree)):
+        gather_processes(np.zeros(1, np.int8))
+        return tree
+    return jax.tree.map(lambda a: a if a.is_fully_addressable else jnp.asarray(gather_processes(a)), tree)
 
 
 def make_chunk(cfg: Config, n_steps: int, devices=None, donate: bool = True):

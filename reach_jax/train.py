@@ -12,8 +12,10 @@ import dataclasses
 import itertools
 import json
 import math
+import os
 import sys
 import time
+import zlib
 from pathlib import Path
 from typing import NamedTuple
 
@@ -39,6 +41,14 @@ from reach_jax.progress import LearnerEta, Progress
 EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
 EXIT_NUMERICS = 3  # a learner went non-finite; the last good checkpoint is kept
 EXIT_IO = 4  # a write failed; the last good checkpoint is kept
+EXIT_PEER = 5  # another process of a multi-process run stopped; the last good checkpoint is kept
+
+# Where --multihost looks for a setting that its flag does not give (jax itself reads only the first).
+CLUSTER_ENV = {
+    "coordinator": "JAX_COORDINATOR_ADDRESS",
+    "num_processes": "JAX_NUM_PROCESSES",
+    "process_id": "JAX_PROCESS_ID",
+}
 
 
 class Batch(NamedTuple):
@@ -283,23 +293,29 @@ def truncate_metrics(run_dir: Path, chunk: int) -> None:
 def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True, stream=None) -> Batch:
     """Train cfg.train's learners in chunks, logging and checkpointing into run_dir; returns the final batch.
 
+    In a multi-process run every process trains the same batch (each its slice) and only process 0 writes
+    run_dir and draws the bar; resuming, every process reads the newest checkpoint, so run_dir must be shared.
     Raises NumericsError if a learner goes non-finite; the last good checkpoint stays on disk.
     """
     run_dir = Path(run_dir)
     table = learner_table(cfg.train)
+    writer = jax.process_index() == 0
     if resume:
+        # Process 0 writes the next checkpoint only after a gather that needs every process's loaded slice.
         batch, chunk = load_batch(run_dir, cfg)
-        truncate_metrics(run_dir, chunk)
+        if writer:
+            truncate_metrics(run_dir, chunk)
     else:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        checkpoint.atomic_write_bytes(run_dir / checkpoint.CONFIG_FILE, to_json(cfg).encode())
-        (run_dir / checkpoint.METRICS_FILE).unlink(missing_ok=True)
         batch, chunk = init_batch(cfg), 0
-        write_checkpoint(run_dir, chunk, batch, cfg)
+        if writer:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            checkpoint.atomic_write_bytes(run_dir / checkpoint.CONFIG_FILE, to_json(cfg).encode())
+            (run_dir / checkpoint.METRICS_FILE).unlink(missing_ok=True)
+            write_checkpoint(run_dir, chunk, batch, cfg)
     budget = jnp.asarray(cfg.train.trials, jnp.int32)
     run_chunk = rollout.make_chunk(cfg, cfg.train.chunk_steps)
     total = cfg.train.trials * len(table)
-    bar = Progress(total, "trials", stream=stream) if progress else None
+    bar = Progress(total, "trials", stream=stream) if progress and writer else None
     eta = LearnerEta(cfg.train.trials)
     started = time.monotonic()
 
@@ -338,14 +354,14 @@ def run(cfg: Config, run_dir: Path, resume: bool = False, progress: bool = True,
         if not ok.all():
             i = int(np.argmin(ok))
             cond, seed = table[i]
-            last = checkpoint.list_checkpoints(run_dir)[-1]
+            last = checkpoint.checkpoint_path(run_dir, chunk - 1)  # written by process 0 after the last chunk
             raise NumericsError(
                 f"learner {i} (condition {cond}, seed {seed}) became non-finite in chunk {chunk}; "
                 f"last good checkpoint kept: {last}"
             )
         batch = batch._replace(states=states)
         rows = metrics_rows(states, table, chunk, time.monotonic() - started, cfg)
-        if jax.process_index() == 0:  # one writer when several hosts share the run directory
+        if writer:  # one writer when several processes share the run directory
             checkpoint.append_lines(run_dir / checkpoint.METRICS_FILE, [json.dumps(r) for r in rows])
             write_checkpoint(run_dir, chunk, batch, cfg)
         if bar:
@@ -386,6 +402,14 @@ def _hidden_pad(text: str) -> int:
 
 def _non_negative_int(text: str) -> int:
     return _whole_number(text, 0)
+
+
+def _coordinator(text: str) -> str:
+    host, sep, port = text.rpartition(":")
+    if not sep or not host:
+        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT")
+    _whole_number(port, 1, 65535)
+    return text
 
 
 def _conditions(text: str) -> tuple[str, ...]:
@@ -501,8 +525,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--multihost",
         action="store_true",
-        help="join a multi-process run via jax.distributed.initialize (cluster env or JAX_COORDINATOR_ADDRESS, "
-        "JAX_NUM_PROCESSES, JAX_PROCESS_ID); process 0 writes the shared run directory",
+        help="join a multi-process run (jax.distributed.initialize); the three settings below come from their "
+        "flags, else from JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID, else from the cluster "
+        "(SLURM, Open MPI); process 0 writes the run directory, which --resume needs on a shared file system",
+    )
+    p.add_argument(
+        "--coordinator",
+        type=_coordinator,
+        metavar="HOST:PORT",
+        help="with --multihost: address of process 0, where it serves the other processes",
+    )
+    p.add_argument("--num-processes", type=_positive_int, metavar="N", help="with --multihost: processes in the run")
+    p.add_argument("--process-id", type=_non_negative_int, metavar="I", help="with --multihost: this process, 0 to N-1")
+    p.add_argument(
+        "--init-timeout",
+        type=_positive_int,
+        metavar="SECONDS",
+        help="with --multihost: how long to wait for every process to connect (default 300)",
     )
     return p
 
@@ -524,6 +563,39 @@ def _overrides(args) -> dict:
         "keep_every": "keep_every",
     }
     return {field: getattr(args, arg) for arg, field in names.items() if getattr(args, arg) is not None}
+
+
+def cluster_settings(args, environ=None) -> rollout.Cluster | None:
+    """How to join a multi-process run: the flags, else the JAX_* variables of `environ`; None without --multihost.
+
+    Raises UsageError for a malformed value, a process id out of range, or a cluster flag without --multihost.
+
+    Args:
+      args: the parsed command line.
+      environ: environment to read (default os.environ).
+    """
+    if not args.multihost:
+        given = [name for name in (*CLUSTER_ENV, "init_timeout") if getattr(args, name) is not None]
+        if given:
+            raise UsageError(f"--{given[0].replace('_', '-')} needs --multihost")
+        return None
+    environ = os.environ if environ is None else environ
+    parse = {"coordinator": _coordinator, "num_processes": _positive_int, "process_id": _non_negative_int}
+    found = {}
+    for name, var in CLUSTER_ENV.items():
+        value = getattr(args, name)
+        if value is None and environ.get(var, "").strip():
+            try:
+                value = parse[name](environ[var].strip())
+            except argparse.ArgumentTypeError as exc:
+                raise UsageError(f"{var}: {exc}") from None
+        found[name] = value
+    n, i = found["num_processes"], found["process_id"]
+    if n is not None and i is not None and i >= n:
+        raise UsageError(f"process id {i} is not below the number of processes {n}")
+    if args.init_timeout is not None:
+        found["init_timeout"] = args.init_timeout
+    return rollout.Cluster(**found)
 
 
 def build_config(args) -> Config:
@@ -591,21 +663,59 @@ def main(argv=None) -> int:
     prog = build_parser().prog
     try:
         args = build_parser().parse_args(argv)
-        # Device count and multi-host must be fixed before JAX's first computation.
-        rollout.configure_backend(args.devices, args.multihost)
-        inv = validate(args)
-    except (UsageError, checkpoint.CheckpointError) as exc:
+        # Device count and multi-process run must be fixed before JAX's first computation.
+        rollout.configure_backend(args.devices, cluster_settings(args))
+    except (UsageError, rollout.ClusterError) as exc:
         sys.stderr.write(error_line(prog, str(exc)))
         return EXIT_USAGE
+    status = _validate_and_run(args, prog)
+    if status and jax.distributed.is_initialized():
+        # The other processes may never reach jax's shutdown barrier at exit (one of them is gone, or stopped
+        # elsewhere); waiting there would block for its timeout and then abort. Leave at once instead.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
+
+
+def _disagreement(inv: Invocation | None) -> UsageError | None:
+    """Why a multi-process run must stop before process 0 writes: a process refused its command line (inv None
+    there), or the processes were given different configs. Every process calls it after checking the run directory.
+    """
+    mine = -1 if inv is None else zlib.crc32(f"{inv.resume} {to_json(inv.cfg)}".encode()) & 0x7FFFFFFF
+    tokens = rollout.gather_processes(np.array([mine], np.int32))
+    if (tokens == -1).any():
+        return UsageError(f"process {int(np.argmax(tokens == -1))} of the multi-process run refused its command line")
+    if (tokens != mine).any():
+        return UsageError("the processes of the multi-process run were given different configs")
+    return None
+
+
+def _validate_and_run(args: argparse.Namespace, prog: str) -> int:
+    """Validate, then train; returns the exit status, after printing the one-line error of a failure."""
     try:
+        inv, refused = validate(args), None
+    except (UsageError, checkpoint.CheckpointError) as exc:
+        inv, refused = None, exc
+    try:
+        if jax.distributed.is_initialized():
+            stop = _disagreement(None if refused else inv)  # a collective: a process that refused joins it too
+            refused = refused or stop
+        if refused is not None:
+            sys.stderr.write(error_line(prog, str(refused)))
+            return EXIT_USAGE
         run(inv.cfg, inv.run_dir, resume=inv.resume, progress=not inv.quiet)
     except NumericsError as exc:
         sys.stderr.write(error_line(prog, str(exc)))
         return EXIT_NUMERICS
+    except rollout.PeerLostError as exc:
+        sys.stderr.write(error_line(prog, str(exc)))
+        return EXIT_PEER
     except OSError as exc:
         sys.stderr.write(error_line(prog, f"write failed, last good checkpoint kept: {exc}"))
         return EXIT_IO
-    print(f"run written to {inv.run_dir}", file=sys.stderr)
+    if jax.process_index() == 0:
+        print(f"run written to {inv.run_dir}", file=sys.stderr)
     return 0
 
 
