@@ -502,6 +502,34 @@ def quality(ep: Episode, learners, starts: np.ndarray, targets: np.ndarray, cfg:
     }
 
 
+def quality_markdown(q: dict, source: str) -> str:
+    """The movement-quality cells and the minimum-jerk yardstick as a Markdown table."""
+    ref = q["minimum_jerk_reference"]
+    lines = [
+        f"# Movement quality — {source}",
+        "",
+        "Over the successful movements of the lattice pairs. Straightness: largest perpendicular deviation over the "
+        "start–target distance. Bell: correlation of the speed profile with the minimum-jerk profile of the same "
+        f"distance and duration. Peaks: speed maxima of at least {100 * q['peak_prominence']:g}% prominence.",
+        "",
+        "| learning → test | networks | successful | straightness (median) | bell (median) | speed peaks (median) "
+        "| single-peaked |",
+        "|---|---|---|---|---|---|---|",
+    ]
+
+    def row(name: str, cell: dict, networks: str) -> str:
+        return (
+            f"| {name} | {networks} | {cell['successful']}/{cell['movements']} | "
+            f"{cell['straightness']['median']:.3f} | {cell['bell_correlation']['median']:.2f} | "
+            f"{cell['speed_peaks']['median']:g} | {100 * cell['speed_peaks']['single_peak_fraction']:.1f}% |"
+        )
+
+    for cell in q["cells"]:
+        lines.append(row(f"{cell['learning']} → {cell['test']}", cell, str(cell["networks"])))
+    lines.append(row(f"minimum jerk, {ref['duration_s']:g} s", ref, "–"))
+    return "\n".join(lines) + "\n"
+
+
 class RunData(NamedTuple):
     """Everything read from a run directory before anything is written."""
 
@@ -683,6 +711,7 @@ def write_results(run_dir: Path, data: RunData, results: dict, out: Path | None 
     recipes = results["claims"]["recipes"]
     checkpoint.atomic_write_bytes(out / "table2.md", table2_markdown(results["table2"], recipes, source).encode())
     checkpoint.atomic_write_bytes(out / "claims.md", claims.claims_markdown(results["claims"], source).encode())
+    checkpoint.atomic_write_bytes(out / "quality.md", quality_markdown(results["quality"], source).encode())
     figures.impedance(results["impedance"], results["gains"], data.learners, cfg).savefig(
         out / "impedance.png", dpi=110
     )

@@ -354,6 +354,11 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
     for cell in [*q["cells"], q["minimum_jerk_reference"]]:
         assert {"straightness", "bell_correlation", "speed_peaks", "successful", "movements"} <= set(cell)
     assert q["minimum_jerk_reference"]["successful"] == 1040
+    qmd = (out / "quality.md").read_text()
+    for cell in q["cells"]:
+        counts = f"{cell['networks']} | {cell['successful']}/{cell['movements']}"
+        assert f"| {cell['learning']} → {cell['test']} | {counts} | {cell['straightness']['median']:.3f} |" in qmd
+    assert "| minimum jerk, " in qmd and "| 1040/1040 | 0.000 |" in qmd
 
     for name in ("fig4.png", "fig5.png", "learning_curves.png"):
         img = matplotlib.image.imread(out / name)
