@@ -517,11 +517,16 @@ def quality_markdown(q: dict, source: str) -> str:
         "|---|---|---|---|---|---|---|",
     ]
 
+    def num(value, spec: str) -> str:
+        return "–" if value is None else format(value, spec)  # None: no successful movement to measure
+
     def row(name: str, cell: dict, networks: str) -> str:
+        peaks = cell["speed_peaks"]
+        single = peaks["single_peak_fraction"]
         return (
             f"| {name} | {networks} | {cell['successful']}/{cell['movements']} | "
-            f"{cell['straightness']['median']:.3f} | {cell['bell_correlation']['median']:.2f} | "
-            f"{cell['speed_peaks']['median']:g} | {100 * cell['speed_peaks']['single_peak_fraction']:.1f}% |"
+            f"{num(cell['straightness']['median'], '.3f')} | {num(cell['bell_correlation']['median'], '.2f')} | "
+            f"{num(peaks['median'], 'g')} | {num(single, '.1%')} |"
         )
 
     for cell in q["cells"]:
@@ -638,7 +643,7 @@ def evaluate_run(data: RunData) -> dict:
     for row in table["per_network"]:
         row.update(recipes[row["recipe"]])
 
-    def network(learning, seed, recipe):
+    def net_index(learning, seed, recipe):
         for i, (name, s) in enumerate(data.learners):
             if name == learning and s == seed and recipe_of[i] == recipe:
                 return i
@@ -646,14 +651,14 @@ def evaluate_run(data: RunData) -> dict:
 
     panels = {}
     for letter, learning, test in FIG4_PANELS:
-        i = network(learning, cfg.eval.figure_seed, 0)
+        i = net_index(learning, cfg.eval.figure_seed, 0)
         if i is not None:
             panels[letter] = Episode(*(a[i, TEST_CONDITIONS.index(test)] for a in corners))
     viscous = np.asarray(task.make_condition("viscous", cfg).field)
     per_seed = []
     for k in range(len(recipes)):
         for seed in range(cfg.train.seeds):
-            i, j = network("none", seed, k), network("viscous", seed, k)
+            i, j = net_index("none", seed, k), net_index("viscous", seed, k)
             if i is None or j is None:
                 continue
             hands = {"a": corners.hand[i, 0], "b": corners.hand[i, 1], "c": corners.hand[j, 0], "d": corners.hand[j, 1]}

@@ -318,6 +318,18 @@ def test_cli_corrupt_checkpoint_and_metrics(tiny_run, tmp_path, capsys):
     _cli_error(bad, capsys, bad / checkpoint.METRICS_FILE)
 
 
+def test_quality_markdown_marks_a_cell_without_successes():
+    nothing = {"mean": None, "median": None}
+    empty = {"learning": "none", "test": "viscous", "networks": 1, "movements": 1040, "successful": 0}
+    empty |= {"straightness": nothing, "bell_correlation": nothing}
+    empty["speed_peaks"] = {**nothing, "single_peak_fraction": None}
+    ref = {"duration_s": 0.5, "movements": 1040, "successful": 1040, "straightness": {"median": 0.0}}
+    ref |= {"bell_correlation": {"median": 0.91}, "speed_peaks": {"median": 1.0, "single_peak_fraction": 1.0}}
+    md = evaluate.quality_markdown({"cells": [empty], "minimum_jerk_reference": ref, "peak_prominence": 0.1}, "x")
+    assert "| none → viscous | 1 | 0/1040 | – | – | – | – |" in md
+    assert "| minimum jerk, 0.5 s | – | 1040/1040 | 0.000 | 0.91 | 1 | 100.0% |" in md
+
+
 def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys):
     assert evaluate.main([str(tiny_run)]) == 0
     out = tiny_run / evaluate.EVAL_DIR
@@ -357,7 +369,8 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
     qmd = (out / "quality.md").read_text()
     for cell in q["cells"]:
         counts = f"{cell['networks']} | {cell['successful']}/{cell['movements']}"
-        assert f"| {cell['learning']} → {cell['test']} | {counts} | {cell['straightness']['median']:.3f} |" in qmd
+        straight = "–" if cell["successful"] == 0 else f"{cell['straightness']['median']:.3f}"
+        assert f"| {cell['learning']} → {cell['test']} | {counts} | {straight} |" in qmd
     assert "| minimum jerk, " in qmd and "| 1040/1040 | 0.000 |" in qmd
 
     for name in ("fig4.png", "fig5.png", "learning_curves.png"):
