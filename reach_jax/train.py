@@ -541,7 +541,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--init-timeout",
         type=_positive_int,
         metavar="SECONDS",
-        help="with --multihost: how long to wait for every process to connect (default 300)",
+        help="with --multihost: how long to wait for every process to connect "
+        f"(default {rollout.Cluster._field_defaults['init_timeout']})",
     )
     return p
 
