@@ -4,12 +4,12 @@
 
 Units: learner-steps per second (median of the timed calls of `throughput.time_chunk`). Levers switched off:
 - `dense_layer1`: the layer-1 product and SGD step over all 125 input rows instead of the 45 that can be
-  non-zero (`encoding.coded_support` replaced by None, the dense path of `learner.ts_step`);
-- `draws_per_step`: random draws made one step at a time inside the step body (`rollout.RNG_BLOCK` = 1)
+  non-zero (`Speed.sparse_layer1` off, the dense path of `learner.ts_step`);
+- `draws_per_step`: random draws made one step at a time inside the step body (`Speed.draw_block` = 1)
   instead of 64 steps at a time;
 - `one_device`: the learner axis on one device instead of sharded over all of them;
-- `unpadded_hidden`: the first hidden layer at its 30 units instead of padded to 32 (`train.hidden_pad` = 1);
-- `no_donation`: each chunk writes new state buffers instead of reusing its input's;
+- `unpadded_hidden`: the first hidden layer at its 30 units instead of padded to 32 (`Speed.hidden_pad` = 1);
+- `no_donation`: each chunk writes new state buffers instead of reusing its input's (`Speed.donate` off);
 - `short_chunks`: SHORT_CHUNK steps per compiled call instead of ~0.4 s worth, so the host syncs more often.
 The variants are interleaved over `--reps` rounds, so that the machine's drift hits them alike; the JSON
 holds every round and the medians.
@@ -25,7 +25,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from reach_jax import encoding, rollout
+from reach_jax import distribute, rollout
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -42,6 +42,12 @@ VARIANTS = (
     "short_chunks",
 )
 SHORT_CHUNK = 1000  # steps per call of the short_chunks variant
+SPEED_OFF = {  # variant -> the rollout.Speed settings that switch its lever off
+    "dense_layer1": {"sparse_layer1": False},
+    "draws_per_step": {"draw_block": 1},
+    "unpadded_hidden": {"hidden_pad": 1},
+    "no_donation": {"donate": False},
+}
 
 
 def parse(argv=None) -> argparse.Namespace:
@@ -57,30 +63,19 @@ def measure(variant: str, n_learners: int, cfg) -> float:
     """Learner-steps/s of one variant at one batch size."""
     import jax
 
-    support, block, devices = encoding.coded_support, rollout.RNG_BLOCK, jax.devices()
-    n_steps, donate = None, True
-    try:
-        if variant == "dense_layer1":
-            encoding.coded_support = lambda *args, **kwargs: None
-        elif variant == "draws_per_step":
-            rollout.RNG_BLOCK = 1
-        elif variant == "one_device":
-            devices = devices[:1]
-        elif variant == "unpadded_hidden":
-            cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, hidden_pad=1))
-        elif variant == "no_donation":
-            donate = False
-        elif variant == "short_chunks":
-            n_steps = SHORT_CHUNK
-        return throughput.time_chunk(n_learners, devices, cfg, False, n_steps, donate)["steps_per_s"]
-    finally:
-        encoding.coded_support, rollout.RNG_BLOCK = support, block
+    devices, n_steps = jax.devices(), None
+    speed = dataclasses.replace(rollout.DEFAULT_SPEED, **SPEED_OFF.get(variant, {}))
+    if variant == "one_device":
+        devices = devices[:1]
+    elif variant == "short_chunks":
+        n_steps = SHORT_CHUNK
+    return throughput.time_chunk(n_learners, devices, cfg, False, n_steps, speed)["steps_per_s"]
 
 
 def main(argv=None) -> int:
     """Measure every variant, print the table, write the JSON."""
     args = parse(argv)
-    rollout.configure_backend(args.devices)
+    distribute.setup_backend(args.devices)
     import jax
 
     from reach_jax.config import Config

@@ -21,7 +21,8 @@ import sys
 import time
 from pathlib import Path
 
-from reach_jax import rollout
+from reach_jax import distribute, rollout
+from reach_jax import run_dir as run_dir_io
 
 BATCHES = (1, 8, 32, 128, 512)  # learners per batch; 8 is Table 2 (4 conditions x 2 networks)
 TABLE2_LEARNERS = 8  # networks trained for Table 2
@@ -50,14 +51,21 @@ def batch_of(n_learners: int, cfg):
     import jax
     import jax.numpy as jnp
 
-    from reach_jax import train
+    from reach_jax import batch
 
     seeds = -(-n_learners // 4)
     cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, seeds=seeds))
-    return jax.tree.map(lambda a: jnp.copy(a[:n_learners]), train.init_batch(cfg))
+    return jax.tree.map(lambda a: jnp.copy(a[:n_learners]), batch.init_batch(cfg))
 
 
-def time_chunk(n_learners: int, devices, cfg, quick: bool, n_steps: int | None = None, donate: bool = True) -> dict:
+def time_chunk(
+    n_learners: int,
+    devices,
+    cfg,
+    quick: bool,
+    n_steps: int | None = None,
+    speed: rollout.Speed = rollout.DEFAULT_SPEED,
+) -> dict:
     """Median learner-steps/s and compile time of make_chunk for one batch size on the given devices.
 
     Args:
@@ -66,7 +74,7 @@ def time_chunk(n_learners: int, devices, cfg, quick: bool, n_steps: int | None =
       cfg: model config.
       quick: shorter timings.
       n_steps: steps per timed call; None picks enough for TARGET_SECONDS (the probe's length if quick).
-      donate: make_chunk's buffer donation.
+      speed: make_chunk's speed settings.
 
     Returns:
       {"steps_per_s": learner-steps/s, "compile_s": s, "steps": steps per call, "devices": devices used}.
@@ -74,27 +82,27 @@ def time_chunk(n_learners: int, devices, cfg, quick: bool, n_steps: int | None =
     import jax
     import jax.numpy as jnp
 
-    batch = batch_of(n_learners, cfg)
+    learners = batch_of(n_learners, cfg)
     budget = jnp.asarray(2**31 - 1, jnp.int32)
     probe = 200
-    chunk = rollout.make_chunk(cfg, probe, devices, donate)
+    chunk = rollout.make_chunk(cfg, probe, devices, speed)
     t0 = time.perf_counter()
-    states = jax.block_until_ready(chunk(batch.states, batch.conds, batch.hypers, budget))
+    states = jax.block_until_ready(chunk(learners.states, learners.conds, learners.hypers, budget))
     first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    states = jax.block_until_ready(chunk(states, batch.conds, batch.hypers, budget))
+    states = jax.block_until_ready(chunk(states, learners.conds, learners.hypers, budget))
     per_step = (time.perf_counter() - t0) / probe
     compile_s = first - per_step * probe
 
     if n_steps is None:  # a chunk long enough that each timed call lasts TARGET_SECONDS; --quick keeps the probe
         n_steps = probe if quick else max(probe, int(TARGET_SECONDS / per_step))
     if n_steps != probe:
-        chunk = rollout.make_chunk(cfg, n_steps, devices, donate)
-        states = jax.block_until_ready(chunk(states, batch.conds, batch.hypers, budget))  # compile, warm
+        chunk = rollout.make_chunk(cfg, n_steps, devices, speed)
+        states = jax.block_until_ready(chunk(states, learners.conds, learners.hypers, budget))  # compile, warm
     times = []
     for _ in range(QUICK_REPS if quick else REPS):
         t0 = time.perf_counter()
-        states = jax.block_until_ready(chunk(states, batch.conds, batch.hypers, budget))
+        states = jax.block_until_ready(chunk(states, learners.conds, learners.hypers, budget))
         times.append(time.perf_counter() - t0)
     used = len(states.arm.sharding.device_set)
     return {
@@ -124,10 +132,10 @@ def schedule_steps(run_dir: Path) -> tuple[float | None, str]:
     A learner that has not reached 2e6 trials is extrapolated with the mean trial length of its last
     TAIL_CHUNKS chunks. The batch runs until its slowest learner is done, so the maximum counts.
     """
-    path = Path(run_dir) / "metrics.jsonl"
-    if not path.exists():
-        return None, f"no {path}: no schedule estimate"
-    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    path = Path(run_dir) / run_dir_io.METRICS_FILE
+    rows = run_dir_io.read_metrics(run_dir)
+    if not rows:
+        return None, f"no rows in {path}: no schedule estimate"
     by_learner: dict[int, list[dict]] = {}
     for r in rows:
         by_learner.setdefault(r["learner"], []).append(r)
@@ -154,7 +162,7 @@ def schedule_steps(run_dir: Path) -> tuple[float | None, str]:
 def main(argv=None) -> int:
     """Run every measurement, print the table, write the JSON; returns the exit status."""
     args = parse(argv)
-    rollout.configure_backend(args.devices)
+    distribute.setup_backend(args.devices)
     import jax
 
     from reach_jax.config import Config
@@ -166,7 +174,7 @@ def main(argv=None) -> int:
     rows = {}
     for n in BATCHES:
         rows[n] = {"all": time_chunk(n, every, cfg, args.quick)}
-        sharded = rollout.learner_mesh(n, every).size > 1
+        sharded = distribute.learner_mesh(n, every).size > 1
         rows[n]["one"] = time_chunk(n, one, cfg, args.quick) if sharded else rows[n]["all"]
         print(f"measured {n} learners", file=sys.stderr, flush=True)
     ref = time_reference(cfg, args.quick)

@@ -1,4 +1,4 @@
-"""Atomic, versioned checkpoints of batched learner pytrees, and the run directory layout.
+"""Atomic, versioned checkpoints of batched learner pytrees, and atomic file writes.
 
 A checkpoint is one .npz holding every leaf under its pytree path, plus a JSON `__meta__` entry
 (format version, chunk index, learner table). Files are written to a temporary name, fsynced and
@@ -16,12 +16,10 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from reach_jax.config import OneLineError
+from reach_jax.errors import OneLineError
 
 FORMAT_VERSION = 2  # 2: sparse layer-1 rows in the pending step, per-step draws keyed by step index
 CHECKPOINT_DIR = "checkpoints"
-CONFIG_FILE = "config.json"
-METRICS_FILE = "metrics.jsonl"
 KEEP = 2  # newest checkpoints kept on disk
 
 

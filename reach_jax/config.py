@@ -12,7 +12,13 @@ import json
 import math
 from dataclasses import dataclass, field
 
+from reach_jax.errors import printable
+
 CONFIG_VERSION = 1
+
+# Fields that runs made by older versions stored and that no longer belong to the config: speed knobs, which
+# do not change results (rollout.Speed). from_dict drops them, so those runs still load and resume.
+RETIRED_FIELDS = {"train": ("hidden_pad",)}
 
 
 @dataclass(frozen=True)
@@ -144,7 +150,6 @@ class ClaimsConfig:
 
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # Table 2 rows
 TEST_CONDITIONS = ("none", "viscous")  # Table 2 columns
-MAX_HIDDEN_PAD = 128  # largest train.hidden_pad: a TPU vector row of float32; wider only wastes memory
 
 
 @dataclass(frozen=True)
@@ -156,7 +161,6 @@ class TrainConfig:
     conditions: tuple[str, ...] = CONDITIONS  # learning conditions, Table 2 rows
     seed: int = 0  # master PRNG seed
     chunk_steps: int = 50_000  # learner steps per compiled chunk; checkpoint and log between chunks
-    hidden_pad: int = 8  # compiled loops pad the first hidden layer to a multiple of this with inert units (speed)
     lr_grid: tuple[float, ...] = ()  # sweep: learning rates, crossed with the other grids; () = learner.lr
     noise_grid: tuple[float, ...] = ()  # sweep: exploration bounds; () = learner.noise
     lam_grid: tuple[float, ...] = ()  # sweep: lambdas of eq. 3; () = learner.lam
@@ -192,26 +196,6 @@ def tuplify(value):
     if isinstance(value, list):
         return tuple(tuplify(v) for v in value)
     return value
-
-
-def printable(text: str) -> str:
-    """Text with unprintable characters (newlines, controls) escaped, so an error message stays on one line.
-
-    Printable text, escapes included, passes unchanged, so applying it twice is harmless.
-    """
-    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode() for c in text)
-
-
-def error_line(prog: str, message: str) -> str:
-    """The one line a command prints for a user error: "prog: error: message", control characters escaped."""
-    return f"{prog}: error: {printable(message)}\n"
-
-
-class OneLineError(ValueError):
-    """An error for the user whose message always prints on one line."""
-
-    def __str__(self) -> str:
-        return printable(super().__str__())
 
 
 def _check_type(name: str, value, default):
@@ -251,6 +235,7 @@ def from_dict(data: dict) -> Config:
             raise ValueError(f"{f.name}: expected an object")
         defaults = cls()
         values = {}
+        raw = {k: v for k, v in raw.items() if k not in RETIRED_FIELDS.get(f.name, ())}
         for key, value in raw.items():
             if key not in {g.name for g in dataclasses.fields(cls)}:
                 raise ValueError(f"{f.name}.{printable(key)}: unknown field")
@@ -272,14 +257,12 @@ def _check_learner(learner: LearnerConfig) -> None:
 
 
 def _check_train(train: TrainConfig) -> None:
-    for name in ("trials", "seeds", "chunk_steps", "hidden_pad"):
+    for name in ("trials", "seeds", "chunk_steps"):
         if getattr(train, name) < 1:
             raise ValueError(f"train.{name}: must be at least 1")
     for name in ("seed", "keep_every"):
         if getattr(train, name) < 0:
             raise ValueError(f"train.{name}: must not be negative")
-    if train.hidden_pad > MAX_HIDDEN_PAD:
-        raise ValueError(f"train.hidden_pad: must be at most {MAX_HIDDEN_PAD}")
     bad = [c for c in train.conditions if c not in CONDITIONS]
     if bad or not train.conditions or len(set(train.conditions)) != len(train.conditions):
         raise ValueError(f"train.conditions: must be distinct names from {', '.join(CONDITIONS)}")
@@ -288,6 +271,21 @@ def _check_train(train: TrainConfig) -> None:
             raise ValueError(f"train.{name}: must hold positive numbers")
     if not all(math.isfinite(v) and v >= 0 for v in train.noise_anneal_delay_grid):
         raise ValueError("train.noise_anneal_delay_grid: must hold numbers that are not negative")
+
+
+def first_difference(a: Config, b: Config) -> str | None:
+    """Dotted name of the first field (in sorted order) where two configs differ, e.g. "train.trials"; None if equal."""
+
+    def walk(x, y, prefix: str) -> str | None:
+        if isinstance(x, dict) and isinstance(y, dict):
+            for k in sorted(set(x) | set(y)):
+                found = walk(x.get(k), y.get(k), f"{prefix}{k}.")
+                if found:
+                    return found
+            return None
+        return prefix.rstrip(".") if x != y else None
+
+    return walk(*(json.loads(to_json(c)) for c in (a, b)), "")
 
 
 def to_json(config: Config) -> str:

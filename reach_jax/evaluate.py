@@ -1,7 +1,7 @@
 """Table-2 test protocol, Fig. 4-5 movements, after-effect and movement quality (section 4.4, model §8-10).
 
-`python -m reach_jax.evaluate RUN_DIR` loads the newest checkpoint of a run and writes RUN_DIR/eval/:
-table2.json, table2.md, fig4.png, fig5.png, aftereffect.json, quality.json and learning_curves.png.
+`evaluate(run_dir)` (or `python -m reach_jax.evaluate RUN_DIR`) loads the newest checkpoint of a run and writes
+RUN_DIR/eval/: table2.json, table2.md, fig4.png, fig5.png, aftereffect.json, quality.json and learning_curves.png.
 
 Units: positions [m] in the shoulder frame, speeds [m/s], times [s], angles in the JSON files [deg]
 (directions measured counter-clockwise from +x), torques [N m]. Trial lengths are steps of cfg.arm.dt.
@@ -38,37 +38,23 @@ all 12 ordered pairs. The after-effect and quality measures are defined in `afte
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
 from pathlib import Path
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import checkpoint, claims, impedance, sensor, stats, task, train
-from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config, error_line
+from reach_jax import batch, checkpoint, claims, figures, impedance, sensor, stats, task
+from reach_jax import run_dir as run_dir_io
+from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config
 from reach_jax.episodes import FAIL, OUTCOME_NAMES, SUCCESS, Episode, n_steps, network_policy, run_episodes
-
-EXIT_USAGE = 2  # missing or corrupt run directory; nothing written
-EXIT_IO = 4  # writing the results failed
+from reach_jax.panels import CORNER_NAMES, FIG4_PANELS, corner_pairs
 
 EVAL_DIR = "eval"
-
-# Fig. 4 panels: (letter, learning condition, test condition).
-FIG4_PANELS = (
-    ("a", "none", "none"),
-    ("b", "none", "viscous"),
-    ("c", "viscous", "none"),
-    ("d", "viscous", "viscous"),
-    ("e", "random", "none"),
-    ("f", "random", "viscous"),
-)
-FIG5_PANELS = ("a", "d")
-CORNER_NAMES = ("lower left", "lower right", "upper left", "upper right")  # order of `corner_centres`
+RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "claims")  # each written as NAME.json
 
 
 def lattice_points(cfg: Config) -> np.ndarray:
@@ -96,24 +82,6 @@ def test_pairs(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     return starts[keep], targets[keep]
 
 
-def corner_centres(cfg: Config) -> np.ndarray:
-    """Centres of the four corner cells, in CORNER_NAMES order: (4, 2) [m]."""
-    (x0, y0), (x1, y1) = sensor.field_bounds(cfg.sensor)
-    half = 0.5 * cfg.sensor.cell_size
-    return np.array([[x0 + half, y0 + half], [x1 - half, y0 + half], [x0 + half, y1 - half], [x1 - half, y1 - half]])
-
-
-def corner_pairs(cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Fig. 4 movements between distinct corner-cell centres.
-
-    Returns:
-      (starts (12, 2) [m], targets (12, 2) [m], start corner index (12,) into CORNER_NAMES).
-    """
-    c = corner_centres(cfg)
-    idx = np.array([(i, j) for i in range(len(c)) for j in range(len(c)) if i != j])
-    return c[idx[:, 0]], c[idx[:, 1]], idx[:, 0]
-
-
 def test_fields(cfg: Config) -> jax.Array:
     """(C, 2, 2) viscous fields [N s/m] of TEST_CONDITIONS."""
     return jnp.stack([task.make_condition(name, cfg).field for name in TEST_CONDITIONS])
@@ -139,10 +107,10 @@ def recipe_index(hypers) -> tuple[list[dict], list[int]]:
     Args:
       hypers: rollout.Hyper with a leading learner axis.
     """
-    columns = [np.asarray(getattr(hypers, n)) for n in train.HYPER_GRIDS]
+    columns = [np.asarray(getattr(hypers, n)) for n in batch.HYPER_GRIDS]
     values = [tuple(float(v) for v in row) for row in zip(*columns, strict=True)]
     distinct = list(dict.fromkeys(values))
-    return [dict(zip(train.HYPER_GRIDS, v, strict=True)) for v in distinct], [distinct.index(v) for v in values]
+    return [dict(zip(batch.HYPER_GRIDS, v, strict=True)) for v in distinct], [distinct.index(v) for v in values]
 
 
 def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int]], recipe_of, cfg: Config) -> dict:
@@ -535,50 +503,6 @@ def quality_markdown(q: dict, source: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-class RunData(NamedTuple):
-    """Everything read from a run directory before anything is written."""
-
-    cfg: Config
-    batch: train.Batch
-    chunk: int
-    learners: list
-    metrics: list
-
-
-def read_metrics(run_dir: Path) -> list[dict]:
-    """Rows of metrics.jsonl ([] when the run has no finished chunk); raises CheckpointError on a bad line."""
-    path = Path(run_dir) / checkpoint.METRICS_FILE
-    if not path.exists():
-        return []
-    rows = []
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise checkpoint.CheckpointError(f"{path}: unreadable ({exc})") from None
-    for n, line in enumerate(text.splitlines(), 1):
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            raise checkpoint.CheckpointError(f"{path}: line {n} is not valid JSON") from None
-        if not isinstance(row, dict):
-            raise checkpoint.CheckpointError(f"{path}: line {n} is not a JSON object")
-        rows.append(row)
-    return rows
-
-
-def load_run(run_dir: Path, path: Path | None = None) -> RunData:
-    """Config, newest (or the given) checkpoint and metrics up to it; raises CheckpointError naming the bad path."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise checkpoint.CheckpointError(f"{run_dir}: not a run directory (missing or not a directory)")
-    if path is not None and not Path(path).is_file():
-        raise checkpoint.CheckpointError(f"{path}: no such checkpoint")
-    cfg = train.read_config(run_dir)
-    batch, chunk = train.load_batch(run_dir, cfg, path)
-    metrics = [r for r in read_metrics(run_dir) if r.get("chunk", 0) <= chunk]
-    return RunData(cfg, batch, chunk, train.learner_table(cfg.train), metrics)
-
-
 def pool_aftereffect(per_seed: list[dict], level: float) -> dict:
     """The after-effect measures of several seeds together: mean fractions, and the angle with its interval."""
     if not per_seed:
@@ -615,7 +539,7 @@ def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
     return cells
 
 
-def evaluate_run(data: RunData) -> dict:
+def evaluate_run(data: run_dir_io.Run) -> dict:
     """Run the test protocol on every network of a run; JSON-ready results and the arrays for the figures."""
     cfg = data.cfg
     level = cfg.claims.level
@@ -703,14 +627,12 @@ def evaluate_run(data: RunData) -> dict:
     }
 
 
-def write_results(run_dir: Path, data: RunData, results: dict, out: Path | None = None) -> Path:
+def write_results(run_dir: Path, data: run_dir_io.Run, results: dict, out: Path | None = None) -> Path:
     """Write every file of the evaluation into `out` (default RUN_DIR/eval/); returns that directory."""
-    from reach_jax import figures
-
     cfg = data.cfg
     out = Path(run_dir) / EVAL_DIR if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    for name in ("table2", "aftereffect", "quality", "impedance", "claims"):
+    for name in RESULT_FILES:
         checkpoint.atomic_write_bytes(out / f"{name}.json", json.dumps(results[name], indent=2).encode())
     source = f"{run_dir} (chunk {data.chunk})"
     recipes = results["claims"]["recipes"]
@@ -723,43 +645,22 @@ def write_results(run_dir: Path, data: RunData, results: dict, out: Path | None 
     figures.fig4(results["panels"], *results["corners"], cfg).savefig(out / "fig4.png", dpi=110)
     figures.fig5(results["panels"], results["corners"][2], cfg).savefig(out / "fig5.png", dpi=110)
     figures.learning_curves(data.metrics, cfg).savefig(out / "learning_curves.png", dpi=110)
-    figures.close_all()
     return out
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        self.exit(EXIT_USAGE, error_line(self.prog, message))
+def evaluate(run_dir: Path, checkpoint_path: Path | None = None, out: Path | None = None) -> dict:
+    """Evaluate a run at its newest (or the given) checkpoint and write every file into `out` (default RUN_DIR/eval).
 
-
-def build_parser() -> argparse.ArgumentParser:
-    """The command-line interface of `python -m reach_jax.evaluate`."""
-    p = _Parser(prog="python -m reach_jax.evaluate", description=__doc__.splitlines()[0])
-    p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run directory written by reach_jax.train")
-    p.add_argument("--checkpoint", type=Path, metavar="PATH", help="evaluate this checkpoint instead of the newest")
-    p.add_argument("--out", type=Path, metavar="DIR", help="write the results here instead of RUN_DIR/eval")
-    return p
-
-
-def main(argv=None) -> int:
-    """CLI entry point; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        data = load_run(args.run_dir, args.checkpoint)
-    except checkpoint.CheckpointError as exc:
-        sys.stderr.write(error_line(parser.prog, str(exc)))
-        return EXIT_USAGE
-    results = evaluate_run(data)
-    try:
-        out = write_results(args.run_dir, data, results, args.out)
-    except OSError as exc:
-        where = args.out or args.run_dir / EVAL_DIR
-        sys.stderr.write(error_line(parser.prog, f"{where}: write failed ({exc})"))
-        return EXIT_IO
-    print(f"evaluation written to {out}", file=sys.stderr)
-    return 0
+    Returns the JSON-ready results, keyed by file: table2, aftereffect, quality, impedance, claims.
+    Raises CheckpointError (one line, naming the bad file) before anything is written.
+    """
+    run = run_dir_io.load(run_dir, checkpoint_path)
+    results = evaluate_run(run)
+    write_results(run_dir, run, results, out)
+    return {name: results[name] for name in RESULT_FILES}
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from reach_jax import cli
+
+    sys.exit(cli.evaluate_main())

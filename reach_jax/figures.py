@@ -1,28 +1,20 @@
-"""Figures of the evaluation: Fig. 4 hand paths, Fig. 5 speed profiles, learning curves (matplotlib, Agg).
+"""Figures of the evaluation: Fig. 4 hand paths, Fig. 5 speed profiles, learning curves (matplotlib).
 
 Units: positions [m] in the shoulder frame (x right, y forward), speeds [m/s], times [s], trials.
-Every function returns a matplotlib Figure; the caller saves it and then calls `close_all`.
+Every function returns a matplotlib Figure (not registered with pyplot, so nothing to close); the caller saves it.
 """
 
 from __future__ import annotations
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Rectangle
 
-matplotlib.use("Agg")
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
-
-from reach_jax import sensor, task  # noqa: E402
-from reach_jax.config import CONDITIONS, Config  # noqa: E402
-from reach_jax.evaluate import (  # noqa: E402
-    CORNER_NAMES,
-    FIG4_PANELS,
-    FIG5_PANELS,
-    OUTCOME_NAMES,
-    SUCCESS,
-)
+from reach_jax import sensor, task
+from reach_jax.config import CONDITIONS, Config
+from reach_jax.episodes import OUTCOME_NAMES, SUCCESS
+from reach_jax.panels import CORNER_NAMES, FIG4_PANELS, FIG5_PANELS
 
 # Paper's Fig. 4 legend: upper left filled squares, lower left empty squares, upper right x, lower right
 # filled circles; keyed by CORNER_NAMES.
@@ -34,11 +26,6 @@ CORNER_STYLE = {
 }
 CONDITION_COLOR = dict(zip(CONDITIONS, ("tab:blue", "tab:red", "tab:green", "tab:orange"), strict=True))
 SEED_STYLE = ("-", "--", ":", "-.")
-
-
-def close_all() -> None:
-    """Free every open figure."""
-    plt.close("all")
 
 
 def _panel_title(letter: str, learning: str, test: str) -> str:
@@ -78,7 +65,8 @@ def fig4(panels: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np
       start_corner: (M,) index into CORNER_NAMES.
       cfg: model config.
     """
-    fig, axes = plt.subplots(3, 2, figsize=(9, 13))
+    fig = Figure(figsize=(9, 13))
+    axes = fig.subplots(3, 2)
     for ax, (letter, learning, test) in zip(axes.ravel(), FIG4_PANELS, strict=True):
         ax.set_title(_panel_title(letter, learning, test), fontsize=10)
         draw_field(ax, cfg, targets)
@@ -100,7 +88,7 @@ def fig4(panels: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np
         _limits(ax, cfg, drawn)
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
-    handles = [plt.Line2D([], [], lw=0.8, **CORNER_STYLE[n]) for n in CORNER_NAMES]
+    handles = [Line2D([], [], lw=0.8, **CORNER_STYLE[n]) for n in CORNER_NAMES]
     fig.legend(handles, [f"from {n}" for n in CORNER_NAMES], loc="lower center", ncol=4, fontsize=9)
     fig.suptitle(f"Fig. 4: hand paths (network seed {cfg.eval.figure_seed}); gray: goal squares")
     fig.tight_layout(rect=(0, 0.03, 1, 0.98))
@@ -115,7 +103,8 @@ def fig5(panels: dict, start_corner: np.ndarray, cfg: Config):
       start_corner: (M,) index into CORNER_NAMES.
       cfg: model config.
     """
-    fig, axes = plt.subplots(1, len(FIG5_PANELS), figsize=(11, 4), sharey=True)
+    fig = Figure(figsize=(11, 4))
+    axes = fig.subplots(1, len(FIG5_PANELS), sharey=True)
     info = {letter: (learning, test) for letter, learning, test in FIG4_PANELS}
     for ax, letter in zip(axes, FIG5_PANELS, strict=True):
         ax.set_title(_panel_title(letter, *info[letter]), fontsize=10)
@@ -133,7 +122,7 @@ def fig5(panels: dict, start_corner: np.ndarray, cfg: Config):
         ax.set_xlabel("time [s]")
         ax.set_xlim(0, cfg.eval.max_time)
     axes[0].set_ylabel("hand tangential speed [m/s]")
-    handles = [plt.Line2D([], [], lw=0.8, **CORNER_STYLE[n]) for n in CORNER_NAMES]
+    handles = [Line2D([], [], lw=0.8, **CORNER_STYLE[n]) for n in CORNER_NAMES]
     fig.legend(handles, [f"from {n}" for n in CORNER_NAMES], loc="lower center", ncol=4, fontsize=9)
     fig.suptitle("Fig. 5: hand speed (dashed line: goal speed; dotted curves: not reached)")
     fig.tight_layout(rect=(0, 0.07, 1, 0.97))
@@ -156,7 +145,8 @@ def learning_curves(metrics: list[dict], cfg: Config):
       metrics: rows of metrics.jsonl (keys learner, condition, seed, trials and LEARNING_CURVES fields).
       cfg: model config.
     """
-    fig, axes = plt.subplots(len(LEARNING_CURVES), 1, figsize=(8, 13), sharex=True)
+    fig = Figure(figsize=(8, 13))
+    axes = fig.subplots(len(LEARNING_CURVES), 1, sharex=True)
     learners = sorted({(r["learner"], r["condition"], r["seed"]) for r in metrics})
     for ax, (key, label) in zip(axes, LEARNING_CURVES, strict=True):
         for learner, cond, seed in learners:
@@ -206,7 +196,8 @@ def impedance(summary: dict, gains: dict, learners, cfg: Config):
     """
     tests = list(dict.fromkeys(r["test"] for r in summary["per_network"]))
     axes_info = summary["field_axes"]
-    fig, axes = plt.subplots(len(tests), 3, figsize=(15, 5 * len(tests)), squeeze=False)
+    fig = Figure(figsize=(15, 5 * len(tests)))
+    axes = fig.subplots(len(tests), 3, squeeze=False)
     conditions = list(dict.fromkeys(name for name, _ in learners))
     for row, test in enumerate(tests):
         rows = [r for r in summary["per_network"] if r["test"] == test and r["states"] > 0]

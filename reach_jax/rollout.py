@@ -4,103 +4,50 @@ Units: arm state [rad, rad/s], torques [N m], positions [m], forces [N]; counts 
 A step: observe, forward pass, TS update on the previous input, act, RK4. Trials end at the goal, at a
 joint limit or at the safety cap, and reset inside the scan from the learner's own key.
 
-Scale: `make_chunk` shards the learner axis over devices with `jax.shard_map`. Learners never interact, so
+Scale: `make_chunk` shards the learner axis over devices (`distribute`). Learners never interact, so
 each device runs its own slice with no communication; the same code runs on CPU host devices, GPU, TPU or
 several hosts (after `jax.distributed.initialize`), only the device list changes.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from flax import struct
-from jax.experimental import multihost_utils
-from jax.sharding import Mesh, NamedSharding, PartitionSpec
+from jax.sharding import PartitionSpec
 
-from reach_jax import arm, encoding, learner, network, task
-from reach_jax.config import Config, OneLineError, n_inputs
+from reach_jax import arm, distribute, encoding, learner, network, task
+from reach_jax.config import Config, n_inputs
 
-# XLA:CPU hands small reductions to YNNPACK by default; for the per-learner 30x10 and 10x3 products that
-# made the step ~1.6x slower at 128 learners (benchmarks/throughput.py). Keep YNNPACK for real dots only.
-# The option exists only in the CPU compiler; other backends ignore it.
-CPU_XLA_FLAGS = "--xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT"
+MAX_HIDDEN_PAD = 128  # largest Speed.hidden_pad: a TPU vector row of float32; wider only wastes memory
 
 
-def add_cpu_xla_flags() -> None:
-    """Append CPU_XLA_FLAGS to XLA_FLAGS unless set; takes effect if JAX's backend has not started yet."""
-    name = CPU_XLA_FLAGS.split("=")[0]
-    if name not in os.environ.get("XLA_FLAGS", ""):
-        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {CPU_XLA_FLAGS}".strip()
+@dataclass(frozen=True)
+class Speed:
+    """How the compiled loops run. None of it is stored with a run: results do not depend on it bit for bit,
+    except for `sparse_layer1`, which only the lever benchmark turns off.
 
-
-# At import, before any computation: every process that trains (CLI, tests, subprocesses) then compiles
-# the same kernels, so a run resumed in another process stays bit-identical.
-add_cpu_xla_flags()
-
-
-def available_cores() -> int:
-    """CPU cores this process may run on."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-
-
-class Cluster(NamedTuple):
-    """How this process joins a multi-process run; a None field is left to jax's cluster auto-detection."""
-
-    coordinator: str | None  # HOST:PORT of the coordination service that process 0 starts
-    num_processes: int | None  # processes in the run
-    process_id: int | None  # this process, in [0, num_processes)
-    init_timeout: int = 300  # [s] to wait for every process to connect
-
-
-class ClusterError(OneLineError):
-    """This process could not join the other processes of a multi-process run."""
-
-
-class PeerLostError(OneLineError):
-    """A collective across processes failed: another process of the run stopped or is unreachable."""
-
-
-def first_line(exc: BaseException) -> str:
-    """The first non-empty line of an exception's message (XLA's runtime errors span many)."""
-    return next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
-
-
-def configure_backend(devices: int | None = None, cluster: Cluster | None = None) -> None:
-    """Set up JAX before its first computation: CPU compiler options, host device count, multi-process run.
-
-    Args:
-      devices: on CPU, the number of host devices to expose (one per core is the useful maximum);
-        None asks for one per available core when JAX has not started yet, and otherwise keeps what it has.
-        Ignored by GPU/TPU backends, whose devices are physical.
-      cluster: join a multi-process run with `jax.distributed.initialize`; its None fields come from the
-        cluster environment (SLURM, Open MPI, Cloud TPU). Raises ClusterError when they cannot be found.
-        A process that cannot reach the others within `init_timeout` is ended by jax itself (SIGABRT).
+    `benchmarks/levers.py` measures what each one gives by switching it off.
     """
-    add_cpu_xla_flags()
-    if devices is not None:
-        jax.config.update("jax_num_cpu_devices", devices)
-    else:
-        # Too late once JAX has computed (e.g. when called in-process); the default device then stays.
-        with contextlib.suppress(RuntimeError):
-            jax.config.update("jax_num_cpu_devices", available_cores())
-    if cluster is not None:
-        try:
-            jax.distributed.initialize(
-                cluster.coordinator,
-                cluster.num_processes,
-                cluster.process_id,
-                initialization_timeout=cluster.init_timeout,
-            )
-        except (ValueError, TypeError, RuntimeError) as exc:
-            hint = ""
-            if None in cluster[:3]:
-                hint = " (outside SLURM, Open MPI and Cloud TPU, give the coordinator, process count and process id)"
-            raise ClusterError(f"cannot join the multi-process run: {first_line(exc)}{hint}") from None
+
+    hidden_pad: int = 8  # pad the first hidden layer to a multiple of this with inert units; 1 = off
+    draw_block: int = 64  # steps whose uniforms are drawn in one call; the stream does not depend on it
+    donate: bool = True  # a chunk reuses its input states' buffers for its output
+    # Layer 1 and its update over the inputs that can be non-zero (about 1/3 of them), not all 125. Off, the
+    # same terms are summed in another order: equal to float32 rounding, not bit for bit.
+    sparse_layer1: bool = True
+
+    def __post_init__(self):
+        for name, top in (("hidden_pad", MAX_HIDDEN_PAD), ("draw_block", None)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1 or (top is not None and value > top):
+                raise ValueError(f"{name}: must be a whole number in [1, {top or 'inf'}]")
+
+
+DEFAULT_SPEED = Speed()
 
 
 @struct.dataclass
@@ -215,9 +162,6 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
     )
 
 
-RNG_BLOCK = 64  # steps whose uniforms are drawn in one call; a speed knob only, the stream does not depend on it
-
-
 def n_uniforms(cfg: Config) -> int:
     """Uniform draws one step consumes: 2 for the exploration noise, then one new trial's TrialDraws."""
     return 2 + 2 + 2 * cfg.task.target_candidates + 2
@@ -242,7 +186,15 @@ def split_uniforms(u: jax.Array, noise: jax.Array, cfg: Config) -> tuple[jax.Arr
     return rnd, draws
 
 
-def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper: Hyper, cfg: Config, active=None):
+def learner_step(
+    state: LearnerState,
+    u: jax.Array,
+    cond: task.Condition,
+    hyper: Hyper,
+    cfg: Config,
+    active=None,
+    speed: Speed = DEFAULT_SPEED,
+):
     """One learning step of one learner; returns (new state, StepInfo).
 
     Args:
@@ -252,13 +204,16 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
       hyper: its learning constants.
       cfg: model config.
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
+      speed: how the step is computed (the layer-1 support); the result does not depend on it.
     """
     bound = exploration_bound(hyper, state.trials, state.full_at)
     rnd, draws = split_uniforms(u, bound, cfg)
     x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
-    rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)
+    rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)  # carried in the pending step
     lr = hyper.lr if active is None else jnp.where(active, hyper.lr, 0.0)
-    params, out, loss, u1 = learner.ts_step(state.params, x, state.pending, state.n_max, lr, cfg, rows)
+    sparse = speed.sparse_layer1
+    pending_in = state.pending if sparse else state.pending._replace(rows=None)
+    params, out, loss, u1 = learner.ts_step(state.params, x, pending_in, state.n_max, lr, cfg, rows if sparse else None)
 
     tau = network.torque(out[1:], rnd, cfg)
     moved = arm.step(state.arm, tau, cond.field, state.force, cfg.arm)
@@ -341,25 +296,31 @@ def learner_step(state: LearnerState, u: jax.Array, cond: task.Condition, hyper:
 
 
 def budgeted_step(
-    state: LearnerState, u: jax.Array, cond: task.Condition, hyper: Hyper, budget: jax.Array, cfg: Config
+    state: LearnerState,
+    u: jax.Array,
+    cond: task.Condition,
+    hyper: Hyper,
+    budget: jax.Array,
+    cfg: Config,
+    speed: Speed = DEFAULT_SPEED,
 ):
     """learner_step, except that a learner which has ended `budget` trials stays frozen.
 
     Args:
-      state, u, cond, hyper: one learner, as for learner_step.
+      state, u, cond, hyper, speed: one learner, as for learner_step.
       budget: () trials per learner.
       cfg: model config.
     """
     active = state.trials < budget
-    new, info = learner_step(state, u, cond, hyper, cfg, active=active)
+    new, info = learner_step(state, u, cond, hyper, cfg, active=active, speed=speed)
     # The weights of a frozen learner already stay put (zero step size), so the select skips the
     # largest arrays instead of copying them once more every step.
     rest = jax.tree.map(lambda a, b: jnp.where(active, a, b), new.replace(params=None), state.replace(params=None))
     return rest.replace(params=new.params), info
 
 
-def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False):
-    """lax.scan of `step(state, u) -> (state, info)` over n_steps, drawing the uniforms RNG_BLOCK steps at a time.
+def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED):
+    """lax.scan of `step(state, u) -> (state, info)` over n_steps, drawing uniforms speed.draw_block steps at a time.
 
     Drawing a block in one vectorised call keeps the random-number loop out of the per-step body, where it
     cost as many kernel launches as the rest of the step. The stream does not depend on the block size.
@@ -371,6 +332,7 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False):
       n_steps: steps to take.
       cfg: model config.
       batched: state and step carry a leading learner axis.
+      speed: the draw block and the hidden padding.
 
     Returns:
       (state after n_steps, info stacked over the steps).
@@ -383,26 +345,27 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False):
         return jnp.swapaxes(u, 0, 1)
 
     def block_body(s, _):
-        return jax.lax.scan(step, s, draws(s, RNG_BLOCK))
+        return jax.lax.scan(step, s, draws(s, block))
 
-    n_blocks, rest = divmod(n_steps, RNG_BLOCK)
-    state = widen_hidden(state, cfg)
+    block = speed.draw_block
+    n_blocks, rest = divmod(n_steps, block)
+    state = widen_hidden(state, speed.hidden_pad)
     state, info = jax.lax.scan(block_body, state, None, length=n_blocks)
-    info = jax.tree.map(lambda a: a.reshape(n_blocks * RNG_BLOCK, *a.shape[2:]), info)
+    info = jax.tree.map(lambda a: a.reshape(n_blocks * block, *a.shape[2:]), info)
     if rest:
         state, tail = jax.lax.scan(step, state, draws(state, rest))
         info = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), info, tail)
     return narrow_hidden(state, cfg), info
 
 
-def widen_hidden(state: LearnerState, cfg: Config) -> LearnerState:
-    """state in the layout of the compiled loops: first hidden layer padded to cfg.train.hidden_pad, u1 with it.
+def widen_hidden(state: LearnerState, multiple: int) -> LearnerState:
+    """state in the layout of the compiled loops: first hidden layer padded to a multiple of `multiple`, u1 with it.
 
     Rows of a multiple of 8 float32 fill whole vector registers: the step runs 1.1-1.25x faster with 32 hidden
     units than with 30 (benchmarks/levers.py), and `network.pad_hidden` keeps the added units inert.
     Works with or without a leading learner axis.
     """
-    params = network.pad_hidden(state.params, cfg.train.hidden_pad)
+    params = network.pad_hidden(state.params, multiple)
     u1 = state.pending.u1
     grow = network.dense_layers(params)[0][0].shape[-1] - u1.shape[-1]
     u1 = jnp.pad(u1, [(0, 0)] * (u1.ndim - 1) + [(0, grow)])
@@ -415,89 +378,20 @@ def narrow_hidden(state: LearnerState, cfg: Config) -> LearnerState:
     return state.replace(params=network.unpad_hidden(state.params, cfg), pending=state.pending._replace(u1=u1))
 
 
-def spread_devices(devices) -> list:
-    """devices reordered so that every leading slice spreads over the processes as evenly as it can.
-
-    The first device of each process, then the second of each, and so on; one process keeps its order.
-    """
-    seen: dict[int, int] = {}
-    ranked = []
-    for d in devices:
-        seen[d.process_index] = seen.get(d.process_index, -1) + 1
-        ranked.append(((seen[d.process_index], d.process_index), d))
-    return [d for _, d in sorted(ranked, key=lambda pair: pair[0])]
-
-
-def learner_mesh(n_learners: int, devices=None) -> Mesh:
-    """1-D mesh ("learners") over the most devices that split n_learners evenly.
-
-    Across processes the mesh holds a device of every process, or is one device (each process then runs
-    the whole chunk itself): every process must own a slice to take part in the chunk and its gather.
-
-    Args:
-      n_learners: batch size.
-      devices: devices to use (default: every device of every process, `jax.devices()`).
-    """
-    devices = spread_devices(jax.devices() if devices is None else devices)
-    n_proc = len({d.process_index for d in devices})
-    n = max(d for d in range(1, len(devices) + 1) if n_learners % d == 0 and (d == 1 or d >= n_proc))
-    return Mesh(np.array(devices[:n]), ("learners",))
-
-
-def shard_learners(tree, mesh: Mesh):
-    """Place a batched pytree (learner axis first) on `mesh`, split along the learner axis.
-
-    Works across processes: every process holds the same full host values and keeps its own slices.
-    """
-    sharding = NamedSharding(mesh, PartitionSpec("learners"))
-
-    def place(a):
-        host = np.asarray(a)
-        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
-
-    return jax.tree.map(place, tree)
-
-
-def gather_processes(tree):
-    """process_allgather(tree, tiled=True) that raises PeerLostError when another process is gone.
-
-    Every process must call it at the same point of the program.
-    """
-    try:
-        return multihost_utils.process_allgather(tree, tiled=True)
-    # A broken gloo connection comes as ValueError ("UNKNOWN: Gloo AllGather failed"), others as JaxRuntimeError.
-    except (ValueError, RuntimeError) as exc:
-        raise PeerLostError(f"lost another process of the multi-process run: {first_line(exc)}") from None
-
-
-def to_host(tree):
-    """tree with every array whole on this process: arrays split across processes are all-gathered.
-
-    Across processes it always meets the others, also when nothing is split (a chunk on one device runs
-    whole on every process), so that a lost process shows as PeerLostError at the next chunk.
-    """
-    if jax.process_count() == 1:
-        return tree
-    if all(a.is_fully_addressable for a in jax.tree.leaves(tree)):
-        gather_processes(np.zeros(1, np.int8))
-        return tree
-    return jax.tree.map(lambda a: a if a.is_fully_addressable else jnp.asarray(gather_processes(a)), tree)
-
-
-def make_chunk(cfg: Config, n_steps: int, devices=None, donate: bool = True):
+def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_SPEED):
     """Compiled run of n_steps steps for a batch of learners: (states, conds, hypers, budget) -> states.
 
     The learner axis is the leading axis of every argument; `budget` is a () trial count per learner.
     Stats are reset at the start of the chunk, so they describe this chunk alone. The learner axis is
-    sharded over `learner_mesh(n_learners, devices)`; the states buffers are donated.
+    sharded over `distribute.learner_mesh(n_learners, devices)`; the states buffers are donated (speed.donate).
 
     Args:
       cfg: model config.
       n_steps: learner steps per call.
       devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
-      donate: reuse the input states' buffers for the output (False only to measure what it gives).
+      speed: how the loop is compiled; the result does not depend on it.
     """
-    batched = jax.vmap(lambda s, u, c, h, b: budgeted_step(s, u, c, h, b, cfg)[0], in_axes=(0, 0, 0, 0, None))
+    batched = jax.vmap(lambda s, u, c, h, b: budgeted_step(s, u, c, h, b, cfg, speed)[0], in_axes=(0, 0, 0, 0, None))
 
     def chunk(states, conds, hypers, budget):
         states = states.replace(stats=jax.tree.map(jnp.zeros_like, states.stats))
@@ -505,13 +399,13 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, donate: bool = True):
         def step_body(carry, u):
             return batched(carry, u, conds, hypers, budget), None
 
-        return scan_steps(step_body, states, n_steps, cfg, batched=True)[0]
+        return scan_steps(step_body, states, n_steps, cfg, batched=True, speed=speed)[0]
 
-    compiled, donated = {}, (0,) if donate else ()
+    compiled, donated = {}, (0,) if speed.donate else ()
 
     def run(states, conds, hypers, budget):
         n_learners = jax.tree.leaves(states)[0].shape[0]
-        mesh = learner_mesh(n_learners, devices)
+        mesh = distribute.learner_mesh(n_learners, devices)
         if mesh.size not in compiled:
             if mesh.size == 1:
                 compiled[mesh.size] = (None, jax.jit(chunk, donate_argnums=donated))
@@ -523,28 +417,19 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, donate: bool = True):
                 compiled[mesh.size] = (mesh, jax.jit(mapped, donate_argnums=donated))
         mesh, fn = compiled[mesh.size]
         if mesh is not None:
-            states, conds, hypers = (_on_mesh(t, mesh) for t in (states, conds, hypers))
+            states, conds, hypers = (distribute.on_mesh(t, mesh) for t in (states, conds, hypers))
         return fn(states, conds, hypers, budget)
 
     return run
 
 
-def _on_mesh(tree, mesh: Mesh):
-    """tree unchanged if it is already split over mesh along the learner axis, else placed there."""
-    want = NamedSharding(mesh, PartitionSpec("learners"))
-    leaves = jax.tree.leaves(tree)
-    if all(isinstance(a, jax.Array) and a.sharding.is_equivalent_to(want, a.ndim) for a in leaves):
-        return tree
-    return shard_learners(tree, mesh)
-
-
-def make_trace(cfg: Config, n_steps: int):
+def make_trace(cfg: Config, n_steps: int, speed: Speed = DEFAULT_SPEED):
     """Compiled run of one learner that also returns the StepInfo of every step (for tests and plots)."""
 
     def trace(state, cond, hyper):
         def step_body(carry, u):
-            return learner_step(carry, u, cond, hyper, cfg)
+            return learner_step(carry, u, cond, hyper, cfg, speed=speed)
 
-        return scan_steps(step_body, state, n_steps, cfg)
+        return scan_steps(step_body, state, n_steps, cfg, speed=speed)
 
     return jax.jit(trace)

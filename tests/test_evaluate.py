@@ -7,13 +7,15 @@ import dataclasses
 import json
 import shutil
 
+import chex
 import jax
 import jax.numpy as jnp
 import matplotlib.image
 import numpy as np
 import pytest
 
-from reach_jax import arm, checkpoint, claims, episodes, evaluate, network, sensor, task, train
+from reach_jax import arm, batch, checkpoint, claims, cli, episodes, evaluate, network, panels, sensor, task, train
+from reach_jax import run_dir as run_dir_io
 from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config, TrainConfig, to_json
 
 CFG = Config()
@@ -91,13 +93,13 @@ def test_lattice_gives_exactly_1040_pairs_none_touching():
 
 
 def test_corner_pairs_join_the_four_corner_cell_centres():
-    starts, targets, corner = evaluate.corner_pairs(CFG)
+    starts, targets, corner = panels.corner_pairs(CFG)
     assert starts.shape == targets.shape == (12, 2)
     assert np.all(np.any(starts != targets, axis=1))
     (x0, y0), _ = sensor.field_bounds(CFG.sensor)
     half = CFG.sensor.cell_size / 2
     assert [x0 + half, y0 + half] in starts.tolist()
-    np.testing.assert_allclose(starts, evaluate.corner_centres(CFG)[corner])
+    np.testing.assert_allclose(starts, panels.corner_centres(CFG)[corner])
 
 
 # ---- outcome classes with scripted controllers ----
@@ -289,9 +291,9 @@ def tiny_run(tmp_path_factory):
 
 
 def _cli_error(run_dir, capsys, must_name):
-    status = evaluate.main([str(run_dir)])
+    status = cli.evaluate_main([str(run_dir)])
     err = capsys.readouterr().err
-    assert status == evaluate.EXIT_USAGE
+    assert status == cli.EXIT_USAGE
     assert err.count("\n") == 1 and err.startswith("python -m reach_jax.evaluate: error: ")
     assert str(must_name) in err
     assert not (run_dir / evaluate.EVAL_DIR).exists()
@@ -302,7 +304,7 @@ def test_cli_missing_run_dir(tmp_path, capsys):
 
 
 def test_cli_run_dir_without_checkpoints(tmp_path, capsys):
-    (tmp_path / checkpoint.CONFIG_FILE).write_text(to_json(CFG))
+    (tmp_path / run_dir_io.CONFIG_FILE).write_text(to_json(CFG))
     _cli_error(tmp_path, capsys, tmp_path / checkpoint.CHECKPOINT_DIR)
 
 
@@ -314,8 +316,8 @@ def test_cli_corrupt_checkpoint_and_metrics(tiny_run, tmp_path, capsys):
     _cli_error(bad, capsys, newest)
     shutil.rmtree(bad)
     shutil.copytree(tiny_run, bad)
-    (bad / checkpoint.METRICS_FILE).write_text('{"chunk": 1}\n{torn')
-    _cli_error(bad, capsys, bad / checkpoint.METRICS_FILE)
+    (bad / run_dir_io.METRICS_FILE).write_text('{"chunk": 1}\n{torn')
+    _cli_error(bad, capsys, bad / run_dir_io.METRICS_FILE)
 
 
 def test_quality_markdown_marks_a_cell_without_successes():
@@ -331,9 +333,9 @@ def test_quality_markdown_marks_a_cell_without_successes():
 
 
 def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys):
-    assert evaluate.main([str(tiny_run)]) == 0
+    assert cli.evaluate_main([str(tiny_run)]) == 0
     out = tiny_run / evaluate.EVAL_DIR
-    networks = len(train.learner_table(train.read_config(tiny_run).train))
+    networks = len(batch.learner_table(run_dir_io.read_config(tiny_run).train))
 
     t2 = json.loads((out / "table2.json").read_text())
     assert t2["pairs_per_network"] == 1040
@@ -377,3 +379,19 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
         img = matplotlib.image.imread(out / name)
         assert img.ndim == 3 and min(img.shape[:2]) > 300
         assert img[..., :3].std() > 0.05  # not a blank canvas
+
+
+def test_python_api_evaluates_into_a_chosen_folder_and_loads_the_trained_parameters(tiny_run, tmp_path):
+    results = evaluate.evaluate(tiny_run, out=tmp_path / "api")
+    assert set(results) == set(evaluate.RESULT_FILES)
+    for name in evaluate.RESULT_FILES:
+        assert json.loads((tmp_path / "api" / f"{name}.json").read_text()) == json.loads(json.dumps(results[name]))
+    params, learners = run_dir_io.load_params(tiny_run)
+    assert learners == batch.learner_table(run_dir_io.read_config(tiny_run).train)
+    newest, _ = run_dir_io.load_batch(tiny_run, run_dir_io.read_config(tiny_run))
+    chex.assert_trees_all_equal(params, newest.states.params)
+    assert all(leaf.shape[0] == len(learners) for leaf in jax.tree.leaves(params))
+    # The loaded parameters drive the network as a plain function.
+    one = jax.tree.map(lambda a: a[0], params)
+    out = network.apply(one, jnp.zeros(125), CFG)
+    assert out.shape == (3,) and bool(jnp.all(jnp.isfinite(out)))

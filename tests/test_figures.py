@@ -4,22 +4,15 @@ from __future__ import annotations
 
 import matplotlib.image
 import numpy as np
-import pytest
 
-from reach_jax import evaluate, figures
+from reach_jax import evaluate, figures, panels
 from reach_jax.config import Config
 
 CFG = Config()
 
 
-@pytest.fixture(autouse=True)
-def _close():
-    yield
-    figures.close_all()
-
-
 def corner_episodes():
-    starts, targets, corner = evaluate.corner_pairs(CFG)
+    starts, targets, corner = panels.corner_pairs(CFG)
     return evaluate.minimum_jerk_episodes(starts, targets, CFG), starts, targets, corner
 
 
@@ -29,11 +22,11 @@ def path_lines(ax):
 
 def test_fig4_has_six_labelled_panels_with_paths_field_and_goal_squares(tmp_path):
     ep, starts, targets, corner = corner_episodes()
-    panels = {letter: ep for letter, _, _ in evaluate.FIG4_PANELS if letter != "f"}
-    fig = figures.fig4(panels, starts, targets, corner, CFG)
+    drawn = {letter: ep for letter, _, _ in panels.FIG4_PANELS if letter != "f"}
+    fig = figures.fig4(drawn, starts, targets, corner, CFG)
     axes = fig.axes
     assert len(axes) == 6
-    for ax, (letter, learning, test) in zip(axes, evaluate.FIG4_PANELS, strict=True):
+    for ax, (letter, learning, test) in zip(axes, panels.FIG4_PANELS, strict=True):
         title = ax.get_title()
         assert f"({letter})" in title and f"learning: {learning}" in title and f"test: {test}" in title
         # 4 goal squares around the corner targets and the field outline.

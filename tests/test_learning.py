@@ -7,7 +7,8 @@ import dataclasses
 import jax
 import numpy as np
 
-from reach_jax import episodes, evaluate, train
+from reach_jax import batch, episodes, evaluate, train
+from reach_jax import run_dir as run_dir_io
 from reach_jax.config import Config, TrainConfig
 
 CFG = dataclasses.replace(
@@ -15,13 +16,13 @@ CFG = dataclasses.replace(
 )
 
 
-def _near_successes(batch, starts, targets) -> np.ndarray:
+def _near_successes(group, starts, targets) -> np.ndarray:
     """(networks,) successes of the noise-free test protocol, without the field, on the given pairs."""
     ep, _ = jax.device_get(
         episodes.run_episodes(
             episodes.network_policy(CFG),
-            batch.states.params,
-            batch.conds.input_mask,
+            group.states.params,
+            group.conds.input_mask,
             evaluate.test_fields(CFG)[:1],
             starts,
             targets,
@@ -38,15 +39,16 @@ def test_a_short_run_learns_to_reach_nearby_targets(tmp_path):
     starts, targets = starts[near], targets[near]
     assert len(starts) == 320
 
-    before = _near_successes(train.init_batch(CFG), starts, targets)
-    final = train.run(CFG, tmp_path / "run", progress=False)
-    after = _near_successes(final, starts, targets)
+    before = _near_successes(batch.init_batch(CFG), starts, targets)
+    run_dir = train.run(CFG, tmp_path / "run", progress=False)
+    assert run_dir == tmp_path / "run"
+    after = _near_successes(run_dir_io.load(run_dir).batch, starts, targets)
     # The initial actor outputs 0 (output weights start at 0), so the arm never moves by itself.
     assert before.tolist() == [0, 0]
     assert np.all(after >= 50), after
 
     # The training metrics tell the same story: trials get shorter as the arm learns to reach on its own.
-    rows = evaluate.read_metrics(tmp_path / "run")
+    rows = run_dir_io.read_metrics(tmp_path / "run")
     first = [r["mean_trial_s"] for r in rows if r["chunk"] == 1]
     last_chunk = max(r["chunk"] for r in rows if r["chunk_trials"] > 0)
     last = [r["mean_trial_s"] for r in rows if r["chunk"] == last_chunk - 1]

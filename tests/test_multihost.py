@@ -4,7 +4,6 @@ process with two devices; process 0 alone writes the run, a killed process stops
 
 from __future__ import annotations
 
-import json
 import os
 import signal
 import socket
@@ -16,14 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reach_jax import checkpoint, train
+from reach_jax import checkpoint, cli
+from reach_jax import run_dir as run_dir_io
 
 # Two learners on two devices; the viscous one finishes first (chunk 6), so the tail runs one learner on each process.
 ARGV = ["--trials", "150", "--seeds", "1", "--conditions", "none,viscous", "--chunk-steps", "1000", "--quiet"]
 TIMEOUT = 180  # [s] for any one command, so that a hang fails the test instead of stalling the suite
 PROG = "python -m reach_jax.train: error:"
 # The caller's environment without cluster settings.
-ENV = {k: v for k, v in os.environ.items() if k not in train.CLUSTER_ENV.values()}
+ENV = {k: v for k, v in os.environ.items() if k not in cli.CLUSTER_ENV.values()}
 
 
 def free_port() -> int:
@@ -77,7 +77,7 @@ def final_arrays(run_dir: Path) -> tuple[str, dict]:
 
 
 def metrics_without_wall(run_dir: Path) -> list[dict]:
-    rows = [json.loads(x) for x in (run_dir / checkpoint.METRICS_FILE).read_text().splitlines()]
+    rows = run_dir_io.read_metrics(run_dir)
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
 
 
@@ -102,7 +102,7 @@ def test_two_processes_train_exactly_like_one_process_with_two_devices(tmp_path)
         time.sleep(0.01)
     (status, output), (killed, _) = finish(procs, tmp_path / "logs")
     assert killed == -signal.SIGKILL, "process 1 finished before it could be killed"
-    assert status == train.EXIT_PEER, output[-3000:]
+    assert status == cli.EXIT_PEER, output[-3000:]
     assert output.splitlines()[-1].startswith(f"{PROG} lost another process") and "Traceback" not in output
 
     results = finish(start_processes(["--resume", str(out), "--quiet"], tmp_path / "resumed"), tmp_path / "resumed")
@@ -112,7 +112,7 @@ def test_two_processes_train_exactly_like_one_process_with_two_devices(tmp_path)
     assert name == want_name and arrays.keys() == want_arrays.keys()
     for k in want_arrays:
         np.testing.assert_array_equal(arrays[k], want_arrays[k], err_msg=k)
-    assert (out / checkpoint.CONFIG_FILE).read_bytes() == (want / checkpoint.CONFIG_FILE).read_bytes()
+    assert (out / run_dir_io.CONFIG_FILE).read_bytes() == (want / run_dir_io.CONFIG_FILE).read_bytes()
     assert metrics_without_wall(out) == metrics_without_wall(want)
 
 
@@ -131,11 +131,11 @@ def test_two_processes_train_exactly_like_one_process_with_two_devices(tmp_path)
     ],
 )
 def test_bad_cluster_settings_fail_in_one_line_and_write_nothing(argv, env, message, tmp_path, monkeypatch, capsys):
-    for name in train.CLUSTER_ENV.values():
+    for name in cli.CLUSTER_ENV.values():
         monkeypatch.delenv(name, raising=False)
     for name, value in env.items():
         monkeypatch.setenv(name, value)
-    assert train.main([*argv, "--out", str(tmp_path / "run"), "--quiet"]) == train.EXIT_USAGE
+    assert cli.train_main([*argv, "--out", str(tmp_path / "run"), "--quiet"]) == cli.EXIT_USAGE
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(PROG) and message in err, err
     assert list(tmp_path.iterdir()) == []
@@ -146,6 +146,6 @@ def test_multihost_outside_a_cluster_without_settings_fails_in_one_line(tmp_path
     proc = subprocess.run(
         command(["--multihost", "--out", str(tmp_path / "run")]), env=ENV, capture_output=True, text=True, timeout=60
     )
-    assert proc.returncode == train.EXIT_USAGE, proc.stderr[-3000:]
+    assert proc.returncode == cli.EXIT_USAGE, proc.stderr[-3000:]
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith(f"{PROG} cannot join the multi-process run")
     assert list(tmp_path.iterdir()) == []

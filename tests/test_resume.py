@@ -6,6 +6,7 @@ import dataclasses
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -19,14 +20,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from reach_jax import checkpoint, rollout, train
-from reach_jax.config import MAX_HIDDEN_PAD, Config, TrainConfig, error_line, from_dict, printable, to_dict
+from reach_jax import checkpoint, cli, rollout, train
+from reach_jax import run_dir as run_dir_io
+from reach_jax.cli import error_line
+from reach_jax.config import Config, TrainConfig, from_dict, to_dict
+from reach_jax.errors import printable
 
 ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
 
 
 def cfg_of(argv) -> Config:
-    return train.parse([*argv, "--out", "/nonexistent-parse-only"]).cfg
+    return cli.parse([*argv, "--out", "/nonexistent-parse-only"]).cfg
 
 
 def snapshot(folder: Path) -> dict:
@@ -41,7 +45,7 @@ def final_arrays(run_dir: Path) -> tuple[str, dict]:
 
 
 def metrics_without_wall(run_dir: Path) -> list[dict]:
-    rows = [json.loads(x) for x in (run_dir / checkpoint.METRICS_FILE).read_text().splitlines()]
+    rows = run_dir_io.read_metrics(run_dir)
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
 
 
@@ -68,7 +72,7 @@ def edit_meta(path: Path, edit) -> None:
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("whole") / "run"
-    assert train.main([*ARGV, "--out", str(out), "--quiet"]) == 0
+    assert cli.train_main([*ARGV, "--out", str(out), "--quiet"]) == 0
     return out
 
 
@@ -88,7 +92,7 @@ def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path):
         time.sleep(0.01)
     assert proc.wait() == -signal.SIGKILL, "the run finished before it could be killed"
     killed_at = checkpoint.list_checkpoints(out)[-1]
-    assert train.main(["--resume", str(out), "--quiet"]) == 0
+    assert cli.train_main(["--resume", str(out), "--quiet"]) == 0
     name, arrays = final_arrays(out)
     want_name, want = final_arrays(uninterrupted)
     assert name == want_name and name > killed_at.name
@@ -98,16 +102,24 @@ def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path):
     assert metrics_without_wall(out) == metrics_without_wall(uninterrupted)
 
 
-def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(uninterrupted, tmp_path):
+def older_copy(uninterrupted: Path, tmp_path: Path) -> tuple[Path, Path]:
+    """A copy of the uninterrupted run without its newest checkpoint, and the checkpoint it would resume from."""
     out = copy_run(uninterrupted, tmp_path / "run")
     *_, older, newest = checkpoint.list_checkpoints(out)
     newest.unlink()
-    # Written before `train.hidden_pad` existed: neither the config file nor the checkpoint names it.
-    data = json.loads((out / checkpoint.CONFIG_FILE).read_text())
-    del data["train"]["hidden_pad"]
-    (out / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
-    edit_meta(older, lambda meta: meta["config"]["train"].pop("hidden_pad"))
-    assert train.main(["--resume", str(out), "--quiet"]) == 0
+    return out, older
+
+
+def edit_config(out: Path, edit) -> None:
+    """Rewrite a run's config.json through edit(data), which changes it in place."""
+    data = json.loads((out / run_dir_io.CONFIG_FILE).read_text())
+    edit(data)
+    (out / run_dir_io.CONFIG_FILE).write_text(json.dumps(data))
+
+
+def assert_resumes_to(uninterrupted: Path, out: Path, *flags: str) -> None:
+    """Resuming out (with flags) ends in the uninterrupted run's final checkpoint, bit for bit."""
+    assert cli.train_main(["--resume", str(out), *flags, "--quiet"]) == 0
     name, arrays = final_arrays(out)
     want_name, want = final_arrays(uninterrupted)
     assert name == want_name
@@ -115,26 +127,35 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(u
         np.testing.assert_array_equal(arrays[k], want[k], err_msg=k)
 
 
+def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(uninterrupted, tmp_path):
+    out, older = older_copy(uninterrupted, tmp_path)
+    # Written before `train.keep_every` existed: neither the config file nor the checkpoint names it.
+    edit_config(out, lambda data: data["train"].pop("keep_every"))
+    edit_meta(older, lambda meta: meta["config"]["train"].pop("keep_every"))
+    assert_resumes_to(uninterrupted, out)
+
+
+def test_a_run_that_stored_the_retired_hidden_pad_resumes_with_another_pad_bit_identically(uninterrupted, tmp_path):
+    out, older = older_copy(uninterrupted, tmp_path)
+    # Runs made before the speed settings left the config stored train.hidden_pad = 8.
+    edit_config(out, lambda data: data["train"].update(hidden_pad=8))
+    edit_meta(older, lambda meta: meta["config"]["train"].update(hidden_pad=8))
+    assert_resumes_to(uninterrupted, out, "--hidden-pad", "1")
+
+
 def test_a_checkpoint_from_before_a_new_hyperparameter_resumes_it_from_the_config(uninterrupted, tmp_path):
-    out = copy_run(uninterrupted, tmp_path / "run")
-    *_, older, newest = checkpoint.list_checkpoints(out)
-    newest.unlink()
+    out, older = older_copy(uninterrupted, tmp_path)
     # Written before the anneal delay was a per-learner hyperparameter: the checkpoint lacks its array.
     with np.load(older) as data:
         arrays = {k: data[k] for k in data.files if k != "['hypers'].noise_anneal_delay"}
     assert len(arrays) < len(np.load(older).files)
     np.savez(older, **arrays)
-    assert train.main(["--resume", str(out), "--quiet"]) == 0
-    name, got = final_arrays(out)
-    want_name, want = final_arrays(uninterrupted)
-    assert name == want_name
-    for k in want:
-        np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+    assert_resumes_to(uninterrupted, out)
 
 
 def test_snapshots_are_kept_every_n_chunks(tmp_path):
     out = tmp_path / "run"
-    assert train.main([*ARGV, "--keep-every", "3", "--out", str(out), "--quiet"]) == 0
+    assert cli.train_main([*ARGV, "--keep-every", "3", "--out", str(out), "--quiet"]) == 0
     chunks = [checkpoint.checkpoint_chunk(p) for p in checkpoint.list_checkpoints(out)]
     last = max(chunks)
     assert last > 7
@@ -144,13 +165,13 @@ def test_snapshots_are_kept_every_n_chunks(tmp_path):
 def test_metrics_past_the_checkpoint_and_torn_lines_are_dropped_on_resume(tmp_path):
     out = tmp_path / "run"
     argv = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "100"]
-    assert train.main([*argv, "--out", str(out), "--quiet"]) == 0
-    good = (out / checkpoint.METRICS_FILE).read_text()
+    assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == 0
+    good = (out / run_dir_io.METRICS_FILE).read_text()
     last = json.loads(good.splitlines()[-1])["chunk"]
     later = json.dumps({"chunk": last + 1, "learner": 0})
-    (out / checkpoint.METRICS_FILE).write_text(good + later + "\n" + '{"chunk": ')
-    assert train.main(["--resume", str(out), "--quiet"]) == 0
-    assert (out / checkpoint.METRICS_FILE).read_text() == good
+    (out / run_dir_io.METRICS_FILE).write_text(good + later + "\n" + '{"chunk": ')
+    assert cli.train_main(["--resume", str(out), "--quiet"]) == 0
+    assert (out / run_dir_io.METRICS_FILE).read_text() == good
 
 
 def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupted, tmp_path, capsys):
@@ -168,14 +189,14 @@ def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupt
     edit_meta(newest, lambda meta: meta.update(format_version=checkpoint.FORMAT_VERSION + 1))
     cases.append((run, "format_version"))
     run, _ = broken_copy("config_version")
-    data = json.loads((run / checkpoint.CONFIG_FILE).read_text())
+    data = json.loads((run / run_dir_io.CONFIG_FILE).read_text())
     data["version"] = 99
-    (run / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
+    (run / run_dir_io.CONFIG_FILE).write_text(json.dumps(data))
     cases.append((run, "version"))
     run, _ = broken_copy("edited_config")
-    data = json.loads((run / checkpoint.CONFIG_FILE).read_text())
+    data = json.loads((run / run_dir_io.CONFIG_FILE).read_text())
     data["learner"]["lr"] = 0.123
-    (run / checkpoint.CONFIG_FILE).write_text(json.dumps(data))
+    (run / run_dir_io.CONFIG_FILE).write_text(json.dumps(data))
     cases.append((run, "config.learner.lr"))
     run, newest = broken_copy("stored_config")
     edit_meta(newest, lambda meta: meta["config"]["train"].update(bogus=1))
@@ -185,7 +206,7 @@ def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupt
     for run, must_name in cases:
         before = snapshot(run)
         extra = ["--trials", "151"] if run.name == "flag_disagrees" else []
-        assert train.main(["--resume", str(run), *extra, "--quiet"]) == train.EXIT_USAGE
+        assert cli.train_main(["--resume", str(run), *extra, "--quiet"]) == cli.EXIT_USAGE
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and must_name in err, (run.name, err)
         assert snapshot(run) == before
@@ -207,16 +228,16 @@ class _Injected:
 
 def test_non_finite_learner_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsys):
     real = rollout.make_chunk
-    monkeypatch.setattr(rollout, "make_chunk", lambda cfg, n: _Injected(real(cfg, n)))
+    monkeypatch.setattr(rollout, "make_chunk", lambda cfg, n, *rest: _Injected(real(cfg, n, *rest)))
     out = tmp_path / "run"
-    assert train.main([*ARGV, "--out", str(out), "--quiet"]) == train.EXIT_NUMERICS
+    assert cli.train_main([*ARGV, "--out", str(out), "--quiet"]) == cli.EXIT_NUMERICS
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "learner 1 (condition random, seed 0)" in err
     newest = checkpoint.list_checkpoints(out)[-1]
     assert newest == checkpoint.checkpoint_path(out, 2)
-    batch, _ = train.load_batch(out, train.read_config(out))
-    assert bool(np.all(np.asarray(train.finite_learners(batch.states))))
-    assert max(json.loads(x)["chunk"] for x in (out / checkpoint.METRICS_FILE).read_text().splitlines()) == 2
+    group, _ = run_dir_io.load_batch(out, run_dir_io.read_config(out))
+    assert bool(np.all(np.asarray(train.finite_learners(group.states))))
+    assert max(r["chunk"] for r in run_dir_io.read_metrics(out)) == 2
 
 
 def test_failed_write_stops_cleanly_and_keeps_the_previous_checkpoint(tmp_path, monkeypatch, capsys):
@@ -231,12 +252,12 @@ def test_failed_write_stops_cleanly_and_keeps_the_previous_checkpoint(tmp_path, 
 
     monkeypatch.setattr(os, "fsync", failing_fsync)
     out = tmp_path / "run"
-    assert train.main([*ARGV, "--out", str(out), "--quiet"]) == train.EXIT_IO
+    assert cli.train_main([*ARGV, "--out", str(out), "--quiet"]) == cli.EXIT_IO
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "No space left on device" in err
     newest = checkpoint.list_checkpoints(out)[-1]
     assert newest == checkpoint.checkpoint_path(out, 2)
-    train.load_batch(out, train.read_config(out))
+    run_dir_io.load_batch(out, run_dir_io.read_config(out))
 
 
 FLAGS = [
@@ -252,6 +273,7 @@ FLAGS = [
     "--noise",
     "--lam",
     "--set",
+    "--config",
     "--quiet",
 ]
 VALUES = st.one_of(
@@ -272,6 +294,7 @@ VALUES = st.one_of(
             'arm.dt="x"',
             "learner.lr=1",
             "x.y=1",
+            "train.hidden_pad=4",
             "0.5,1",
             "",
         ]
@@ -286,8 +309,8 @@ def test_fuzzed_command_lines_never_crash(argv, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     before = snapshot(tmp_path)
     try:
-        inv = train.parse(argv)
-    except (train.UsageError, checkpoint.CheckpointError) as exc:
+        inv = cli.parse(argv)
+    except (cli.UsageError, checkpoint.CheckpointError) as exc:
         assert str(exc) and "\n" not in str(exc)
     except SystemExit as exc:  # --help and friends
         assert exc.code == 0
@@ -342,9 +365,17 @@ def test_negative_exploration_settings_are_rejected(field):
         from_dict(data)
 
 
-@pytest.mark.parametrize("pad, message", [(0, "must be at least 1"), (MAX_HIDDEN_PAD + 1, "must be at most")])
-def test_hidden_pad_out_of_range_is_rejected(pad, message):
-    data = json.loads(json.dumps(to_dict(Config())))
-    data["train"]["hidden_pad"] = pad
-    with pytest.raises(ValueError, match=f"train.hidden_pad: {message}"):
-        from_dict(data)
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--hidden-pad", "0"], "not a whole number in [1, "),
+        (["--hidden-pad", str(rollout.MAX_HIDDEN_PAD + 1)], "not a whole number in [1, "),
+        (["--set", "train.hidden_pad=4"], "no longer a config field"),
+    ],
+)
+def test_hidden_pad_is_a_checked_speed_setting_not_a_config_field(argv, message):
+    with pytest.raises(cli.UsageError, match=re.escape(message)):
+        cli.parse([*ARGV, *argv, "--out", "/nonexistent-parse-only"])
+    with pytest.raises(ValueError, match="hidden_pad"):
+        rollout.Speed(hidden_pad=rollout.MAX_HIDDEN_PAD + 1)
+    assert "hidden_pad" not in to_dict(Config())["train"]

@@ -28,21 +28,21 @@ def test_sharded_chunk_equals_unsharded():
     out = _run(
         f"""
         import dataclasses
-        from reach_jax import rollout
-        rollout.configure_backend({N_DEVICES})
+        from reach_jax import distribute
+        distribute.setup_backend({N_DEVICES})
         import jax, jax.numpy as jnp, numpy as np
-        from reach_jax import train
+        from reach_jax import batch, rollout
         from reach_jax.config import Config, TrainConfig
 
         assert len(jax.devices()) == {N_DEVICES}
         cfg = dataclasses.replace(Config(), train=dataclasses.replace(TrainConfig(), trials=10**6, seeds=2))
-        batch = train.init_batch(cfg)  # 4 conditions x 2 seeds = 8 learners
+        group = batch.init_batch(cfg)  # 4 conditions x 2 seeds = 8 learners
         budget = jnp.asarray(10**6)
-        fresh = lambda: jax.tree.map(jnp.copy, batch.states)
+        fresh = lambda: jax.tree.map(jnp.copy, group.states)
         one = rollout.make_chunk(cfg, 300, devices=jax.devices()[:1])
         many = rollout.make_chunk(cfg, 300)
-        a = one(one(fresh(), batch.conds, batch.hypers, budget), batch.conds, batch.hypers, budget)
-        b = many(many(fresh(), batch.conds, batch.hypers, budget), batch.conds, batch.hypers, budget)
+        a = one(one(fresh(), group.conds, group.hypers, budget), group.conds, group.hypers, budget)
+        b = many(many(fresh(), group.conds, group.hypers, budget), group.conds, group.hypers, budget)
         assert len(a.arm.sharding.device_set) == 1
         assert len(b.arm.sharding.device_set) == {N_DEVICES}
         for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
@@ -61,8 +61,8 @@ def test_cli_devices_flag_gives_the_same_run(tmp_path):
         _run(
             f"""
             import sys
-            from reach_jax import train
-            sys.exit(train.main({[*argv, "--devices", str(devices), "--out", str(out)]!r}))
+            from reach_jax import cli
+            sys.exit(cli.train_main({[*argv, "--devices", str(devices), "--out", str(out)]!r}))
             """
         )
     names = [checkpoint.list_checkpoints(tmp_path / f"d{d}")[-1] for d in (1, N_DEVICES)]

@@ -11,8 +11,18 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, checkpoint, encoding, learner, network, rollout, sensor, task, train
-from reach_jax.config import CONDITIONS, Config, LearnerConfig, TaskConfig, TrainConfig, n_inputs, n_past_inputs
+from reach_jax import arm, batch, cli, encoding, learner, network, rollout, sensor, task, train
+from reach_jax import run_dir as run_dir_io
+from reach_jax.config import (
+    CONDITIONS,
+    Config,
+    LearnerConfig,
+    TaskConfig,
+    TrainConfig,
+    n_inputs,
+    n_past_inputs,
+    to_dict,
+)
 
 CFG = Config()
 
@@ -147,7 +157,7 @@ def test_draws_do_not_depend_on_how_steps_are_split():
     split, second = rollout.make_trace(cfg, 80)(half, cond, hyper)
     chex.assert_trees_all_equal(split, whole)
     np.testing.assert_array_equal(np.concatenate([first.rnd, second.rnd]), np.asarray(info.rnd))
-    assert 150 > 2 * rollout.RNG_BLOCK and len(np.unique(np.asarray(info.rnd)[:, 0])) == 150
+    assert 150 > 2 * rollout.DEFAULT_SPEED.draw_block and len(np.unique(np.asarray(info.rnd)[:, 0])) == 150
 
 
 def test_exploration_anneals_once_the_curriculum_is_full():
@@ -192,11 +202,11 @@ def test_exploration_anneals_once_the_curriculum_is_full():
 
 def test_frozen_after_budget():
     cfg = tiny(trials=1)
-    batch = train.init_batch(cfg)
+    group = batch.init_batch(cfg)
     chunk = rollout.make_chunk(cfg, 400)
-    states = chunk(batch.states, batch.conds, batch.hypers, jnp.array(1))
+    states = chunk(group.states, group.conds, group.hypers, jnp.array(1))
     assert int(states.trials[0]) == 1
-    again = chunk(jax.tree.map(jnp.copy, states), batch.conds, batch.hypers, jnp.array(1))
+    again = chunk(jax.tree.map(jnp.copy, states), group.conds, group.hypers, jnp.array(1))
     chex.assert_trees_all_equal(again.params, states.params)
     assert int(again.steps[0]) == int(states.steps[0])
 
@@ -204,10 +214,10 @@ def test_frozen_after_budget():
 def test_batched_chunk_matches_pure_single_learner_train():
     cfg = tiny(conditions=("none", "viscous", "random", "random_nopast"), seeds=2)
     n_steps = 60
-    batch = train.init_batch(cfg)
-    chunked = rollout.make_chunk(cfg, n_steps)(batch.states, batch.conds, batch.hypers, jnp.array(10**6))
-    keys = jnp.stack([train.learner_key(cfg.train.seed, s) for _, s in train.learner_table(cfg.train)])
-    pure = jax.jit(jax.vmap(train.make_train(cfg, n_steps)))(keys, batch.conds, batch.hypers)
+    group = batch.init_batch(cfg)
+    chunked = rollout.make_chunk(cfg, n_steps)(group.states, group.conds, group.hypers, jnp.array(10**6))
+    keys = jnp.stack([batch.learner_key(cfg.train.seed, s) for _, s in batch.learner_table(cfg.train)])
+    pure = jax.jit(jax.vmap(train.make_train(cfg, n_steps)))(keys, group.conds, group.hypers)
     # Same learner, same draws: batching may only reorder float32 sums.
     chex.assert_trees_all_close(pure.params, chunked.params, rtol=1e-4, atol=1e-6)
     np.testing.assert_array_equal(np.asarray(pure.trials), np.asarray(chunked.trials))
@@ -220,13 +230,14 @@ def test_batched_chunk_matches_pure_single_learner_train():
 
 def test_padded_hidden_units_stay_inert_and_change_nothing():
     cfg = tiny(conditions=("viscous", "random"))
-    batch = train.init_batch(cfg)
-    one = jax.tree.map(lambda a: a[0], batch.states)
-    wide = rollout.widen_hidden(one, cfg)
+    group = batch.init_batch(cfg)
+    one = jax.tree.map(lambda a: a[0], group.states)
+    wide = rollout.widen_hidden(one, rollout.DEFAULT_SPEED.hidden_pad)
     (w1, b1), (w2, _), _ = network.dense_layers(wide.params)
     assert w1.shape == (n_inputs(cfg), 32) and b1.shape == (32,) and w2.shape == (32, 10)
     assert wide.pending.u1.shape == (32,)
     chex.assert_trees_all_equal(rollout.narrow_hidden(wide, cfg), one)
+    assert rollout.DEFAULT_SPEED.hidden_pad == 8
 
     @jax.jit
     def learn(state, cond, hyper):
@@ -235,7 +246,7 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
 
         return jax.lax.scan(body, state, rollout.step_uniforms(state.key, state.steps, 2000, cfg))[0]
 
-    cond, hyper = (jax.tree.map(lambda a: a[0], t) for t in (batch.conds, batch.hypers))
+    cond, hyper = (jax.tree.map(lambda a: a[0], t) for t in (group.conds, group.hypers))
     learned = learn(wide, cond, hyper)
     assert int(learned.trials) > 5
     (w1, b1), (w2, _), _ = network.dense_layers(learned.params)
@@ -243,15 +254,22 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
         np.testing.assert_array_equal(pad, 0.0)
     assert float(jnp.abs(w1[:, :30] - network.dense_layers(wide.params)[0][0][:, :30]).max()) > 1e-3
 
-    # The padded layout is a speed choice only: the trainer's results are the same bit for bit.
-    unpadded = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, hidden_pad=1))
+    # The padded layout, like the other Speed settings, is a speed choice only: the results are the same bit for bit.
     budget = jnp.array(10**6)
+    speeds = [rollout.DEFAULT_SPEED] + [
+        rollout.Speed(**{name: value}) for name, value in (("hidden_pad", 1), ("draw_block", 7), ("donate", False))
+    ]
     runs = [
-        rollout.make_chunk(c, 700)(jax.tree.map(jnp.copy, batch.states), batch.conds, batch.hypers, budget)
-        for c in (cfg, unpadded)
+        rollout.make_chunk(cfg, 700, speed=speed)(
+            jax.tree.map(jnp.copy, group.states), group.conds, group.hypers, budget
+        )
+        for speed in [*speeds, rollout.Speed(sparse_layer1=False)]
     ]
     assert network.dense_layers(runs[0].params)[0][0].shape == (2, n_inputs(cfg), 30)
-    chex.assert_trees_all_equal(*runs)
+    for speed, other in zip(speeds[1:], runs[1:], strict=False):
+        chex.assert_trees_all_equal(runs[0], other, custom_message=str(speed))
+    # The dense layer 1 sums the same non-zero terms in another order: equal to float32 rounding, not bit for bit.
+    chex.assert_trees_all_close(runs[0], runs[-1], rtol=1e-4, atol=1e-5)
 
 
 def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
@@ -274,33 +292,63 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         ["--out", str(a_file)],
         ["--out", str(a_file / "sub")],
         ["--resume", str(tmp_path / "missing")],
+        ["--set", 'arm.dt="fast"'],
+        ["--set", "arm.dt=NaN"],
+        ["--set", "arm.length=[0.3]"],
+        ["--set", "arm.no_such_field=1"],
+        ["--set", "nosection.x=1"],
+        ["--set", "train.trials=0"],
+        ["--set", "learner.noise=-1"],
+        ["--config", str(a_file)],
+        ["--config", str(tmp_path / "missing.json")],
     ]
     for argv in cases:
         out_dir = ["--out", str(tmp_path / "run")] if "--out" not in argv and "--resume" not in argv else []
-        status = train.main([*argv, *out_dir, "--quiet"])
+        status = cli.train_main([*argv, *out_dir, "--quiet"])
         err = capsys.readouterr().err
-        assert status == train.EXIT_USAGE, argv
+        assert status == cli.EXIT_USAGE, argv
         assert err.count("\n") == 1 and err.startswith("python -m reach_jax.train: error:"), (argv, err)
         assert "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
 
 
+def test_config_file_set_and_flags_build_the_config_in_that_order_through_from_dict(tmp_path):
+    data = to_dict(Config())
+    data["task"]["goal_speed"] = 0.2
+    data["train"].update(trials=70, seeds=3)
+    path = tmp_path / "cfg.json"
+    path.write_text(json.dumps(data))
+    cfg = cli.parse(["--config", str(path), "--set", "train.seeds=4", "--out", str(tmp_path / "r")]).cfg
+    assert (cfg.task.goal_speed, cfg.train.trials, cfg.train.seeds) == (0.2, 70, 4)
+    cfg = cli.parse(["--config", str(path), "--set", "train.seeds=4", "--seeds", "5", "--out", str(tmp_path / "r")]).cfg
+    assert cfg.train.seeds == 5
+    # A hand-written file may hold a few fields and no version; the rest are the defaults.
+    path.write_text(json.dumps({"learner": {"lr": 0.5}}))
+    cfg = cli.parse(["--config", str(path), "--out", str(tmp_path / "r")]).cfg
+    assert cfg == dataclasses.replace(Config(), learner=dataclasses.replace(LearnerConfig(), lr=0.5))
+    # --set takes an int for a float field, as from_dict does, and checks the result the same way.
+    assert cli.parse(["--set", "arm.dt=1", "--out", str(tmp_path / "r")]).cfg.arm.dt == 1.0
+    with pytest.raises(cli.UsageError, match="arm.length"):
+        cli.parse(["--set", "arm.length=[1, 2, 3]", "--out", str(tmp_path / "r")])
+    assert not (tmp_path / "r").exists()
+
+
 def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
     argv = ["--trials", "30", "--seeds", "2", "--conditions", "none", "--chunk-steps", "300", "--noise", "0.2"]
     sweep = ["--noise-final-ratio", "0.5,1", "--noise-anneal-delay", "0,5", "--noise-anneal-trials", "10"]
-    cfg = train.parse([*argv, *sweep, "--out", "/nonexistent-parse-only"]).cfg
-    table, hypers = train.learner_table(cfg.train), train.learner_hypers(cfg)
+    cfg = cli.parse([*argv, *sweep, "--out", "/nonexistent-parse-only"]).cfg
+    table, hypers = batch.learner_table(cfg.train), batch.learner_hypers(cfg)
     assert len(table) == len(hypers) == 2 * 2 * 2  # ratios x delays x seeds
     assert [s for _, s in table] == [0, 1] * 4
     assert {(h["noise_final_ratio"], h["noise_anneal_delay"]) for h in hypers} == {(0.5, 0), (0.5, 5), (1, 0), (1, 5)}
-    batch = train.init_batch(cfg)
+    group = batch.init_batch(cfg)
     # Seed s starts from the same weights at every sweep point.
-    w = np.asarray(batch.states.params["params"]["Dense_0"]["kernel"])
+    w = np.asarray(group.states.params["params"]["Dense_0"]["kernel"])
     np.testing.assert_array_equal(w[0], w[2])
     assert not np.array_equal(w[0], w[1])
     out = tmp_path / "run"
-    assert train.main([*argv, *sweep, "--out", str(out), "--quiet"]) == 0
-    rows = [json.loads(x) for x in (out / checkpoint.METRICS_FILE).read_text().splitlines()]
+    assert cli.train_main([*argv, *sweep, "--out", str(out), "--quiet"]) == 0
+    rows = run_dir_io.read_metrics(out)
     last = [r for r in rows if r["chunk"] == max(q["chunk"] for q in rows)]
     for r in last:
         assert r["noise_final_ratio"] in (0.5, 1) and r["noise_anneal_trials"] == 10
@@ -320,14 +368,14 @@ def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
     # Learners finish their trials in different chunks, so the batch shrinks in the tail; each learner must end
     # exactly as it does when trained alone.
     argv = ["--trials", "40", "--chunk-steps", "250", "--quiet"]
-    assert train.main([*argv, "--seeds", "3", "--conditions", "none,random", "--out", str(tmp_path / "all")]) == 0
-    rows = [json.loads(x) for x in (tmp_path / "all" / checkpoint.METRICS_FILE).read_text().splitlines()]
+    assert cli.train_main([*argv, "--seeds", "3", "--conditions", "none,random", "--out", str(tmp_path / "all")]) == 0
+    rows = run_dir_io.read_metrics(tmp_path / "all")
     finish = {r["learner"]: r["chunk"] for r in rows if r["trials"] >= 40 and r["chunk_trials"] > 0}
     assert len(set(finish.values())) > 1  # the tail ran with fewer learners
-    cfg = train.read_config(tmp_path / "all")
-    whole, _ = train.load_batch(tmp_path / "all", cfg)
-    assert train.main([*argv, "--seeds", "2", "--conditions", "random", "--out", str(tmp_path / "one")]) == 0
-    alone, _ = train.load_batch(tmp_path / "one", train.read_config(tmp_path / "one"))
+    cfg = run_dir_io.read_config(tmp_path / "all")
+    whole, _ = run_dir_io.load_batch(tmp_path / "all", cfg)
+    assert cli.train_main([*argv, "--seeds", "2", "--conditions", "random", "--out", str(tmp_path / "one")]) == 0
+    alone, _ = run_dir_io.load_batch(tmp_path / "one", run_dir_io.read_config(tmp_path / "one"))
     for i in range(2):
         got = jax.tree.map(lambda a, i=i: np.asarray(a)[3 + i], whole.states.replace(stats=None))
         want = jax.tree.map(lambda a, i=i: np.asarray(a)[i], alone.states.replace(stats=None))
@@ -337,18 +385,18 @@ def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
 def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["--trials", "2e1", "--seeds", "1", "--conditions", "none,random_nopast", "--chunk-steps", "300"]
-    assert train.main([*argv, "--out", str(out), "--quiet"]) == 0
-    cfg = train.read_config(out)
+    assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == 0
+    cfg = run_dir_io.read_config(out)
     assert cfg.train.trials == 20 and cfg.train.conditions == ("none", "random_nopast")
     assert cfg == tiny(conditions=("none", "random_nopast"), chunk_steps=300)
-    rows = [json.loads(x) for x in (out / checkpoint.METRICS_FILE).read_text().splitlines()]
+    rows = run_dir_io.read_metrics(out)
     chunks = max(r["chunk"] for r in rows)
     assert len(rows) == 2 * chunks
     need = {"trials", "steps", "success_rate", "mean_trial_steps", "distance_m", "n_max", "condition", "seed"}
     assert all(need <= set(r) for r in rows)
     assert all(r["trials"] >= 20 for r in rows if r["chunk"] == chunks)
-    batch, chunk = train.load_batch(out, cfg)
+    group, chunk = run_dir_io.load_batch(out, cfg)
     assert chunk == chunks
-    np.testing.assert_array_equal(np.asarray(batch.states.trials), [r["trials"] for r in rows if r["chunk"] == chunks])
-    assert train.main([*argv, "--out", str(out), "--quiet"]) == train.EXIT_USAGE
+    np.testing.assert_array_equal(np.asarray(group.states.trials), [r["trials"] for r in rows if r["chunk"] == chunks])
+    assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == cli.EXIT_USAGE
     assert "--resume" in capsys.readouterr().err

@@ -1,0 +1,169 @@
+"""Run directories: the one reader and writer of config.json, metrics.jsonl and the learners' checkpoints.
+
+Layout of RUN_DIR: config.json (the whole Config), metrics.jsonl (one JSON object per learner per chunk,
+appended), checkpoints/chunk_NNNNNNN.npz (`checkpoint`), and eval/ (written by `evaluate`).
+Every failure to read is a CheckpointError whose one-line message names the file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from reach_jax import batch, checkpoint
+from reach_jax.checkpoint import CheckpointError
+from reach_jax.config import Config, first_difference, from_dict, to_dict, to_json
+
+CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.jsonl"
+
+
+def read_config(run_dir: Path) -> Config:
+    """config.json of a run; raises CheckpointError naming the file and field."""
+    path = Path(run_dir) / CONFIG_FILE
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise CheckpointError(f"{path}: missing") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"{path}: unreadable ({exc})") from None
+    if not isinstance(data, dict):
+        raise CheckpointError(f"{path}: expected a JSON object")
+    try:
+        return from_dict(data)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: {exc}") from None
+
+
+def create(run_dir: Path, cfg: Config) -> None:
+    """Start a run directory: write config.json and drop any metrics of an earlier attempt."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    checkpoint.atomic_write_bytes(run_dir / CONFIG_FILE, to_json(cfg).encode())
+    (run_dir / METRICS_FILE).unlink(missing_ok=True)
+
+
+def holds_run(run_dir: Path) -> bool:
+    """Whether run_dir already has a config.json."""
+    return (Path(run_dir) / CONFIG_FILE).exists()
+
+
+def read_metrics(run_dir: Path, up_to_chunk: float = math.inf) -> list[dict]:
+    """Rows of metrics.jsonl up to a chunk ([] when the run has no finished chunk).
+
+    Raises CheckpointError on a line that is not a JSON object.
+    """
+    path = Path(run_dir) / METRICS_FILE
+    if not path.exists():
+        return []
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: unreadable ({exc})") from None
+    rows = []
+    for n, line in enumerate(text.splitlines(), 1):
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            raise CheckpointError(f"{path}: line {n} is not valid JSON") from None
+        if not isinstance(row, dict):
+            raise CheckpointError(f"{path}: line {n} is not a JSON object")
+        if row.get("chunk", 0) <= up_to_chunk:
+            rows.append(row)
+    return rows
+
+
+def append_metrics(run_dir: Path, rows: list[dict]) -> None:
+    """Append one line per row to metrics.jsonl."""
+    checkpoint.append_lines(Path(run_dir) / METRICS_FILE, [json.dumps(r) for r in rows])
+
+
+def truncate_metrics(run_dir: Path, chunk: int) -> None:
+    """Drop metrics lines past `chunk` (and any torn tail), atomically; a resumed run then appends after them."""
+    path = Path(run_dir) / METRICS_FILE
+    if not path.exists():
+        return
+    keep = []
+    for line in path.read_text().splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            break
+        if row.get("chunk", math.inf) > chunk:
+            break
+        keep.append(line)
+    checkpoint.atomic_write_bytes(path, "".join(x + "\n" for x in keep).encode())
+
+
+def write_checkpoint(run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config) -> Path:
+    """Save the learner states and hyperparameters after `chunk` chunks, with the config as the run's identity."""
+    tree = {"states": learners.states, "hypers": learners.hypers}
+    return checkpoint.save(run_dir, chunk, tree, {"config": to_dict(cfg)}, cfg.train.keep_every)
+
+
+def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[batch.Batch, int]:
+    """Newest (or given) checkpoint of a run as a Batch, with its chunk index.
+
+    Raises CheckpointError when there is none, or when the config stored in it disagrees with `cfg`.
+    """
+    ckpts = checkpoint.list_checkpoints(run_dir)
+    if path is None and not ckpts:
+        raise CheckpointError(f"{Path(run_dir) / checkpoint.CHECKPOINT_DIR}: no checkpoints")
+    path = path or ckpts[-1]
+    fresh = jax.eval_shape(lambda: batch.init_batch(cfg))
+    # Hyperparameters added since the checkpoint was written take their values from the config.
+    defaults = {"hypers": jax.tree.map(np.asarray, batch.hyper_columns(cfg))}
+    tree, meta = checkpoint.load(path, {"states": fresh.states, "hypers": fresh.hypers}, defaults)
+    try:
+        # Through from_dict, so a field added to the config since the checkpoint reads as its default.
+        stored = from_dict(meta["config"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: stored config unreadable ({exc})") from None
+    diff = first_difference(stored, cfg)
+    if diff:
+        raise CheckpointError(f"{path}: field config.{diff} disagrees with {CONFIG_FILE}")
+    states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
+    return batch.Batch(states, batch.conditions(cfg), hypers), int(meta["chunk"])
+
+
+class Run(NamedTuple):
+    """Everything read from a run directory: config, learners at one checkpoint, and the metrics up to it."""
+
+    cfg: Config
+    batch: batch.Batch
+    chunk: int  # chunks trained at the checkpoint
+    learners: list  # (condition, seed index) per learner, `batch.learner_table`
+    metrics: list  # metrics.jsonl rows up to `chunk`
+
+
+def load(run_dir: Path, path: Path | None = None) -> Run:
+    """A run at its newest (or the given) checkpoint; raises CheckpointError naming the bad path."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise CheckpointError(f"{run_dir}: not a run directory (missing or not a directory)")
+    if path is not None and not Path(path).is_file():
+        raise CheckpointError(f"{path}: no such checkpoint")
+    cfg = read_config(run_dir)
+    learners, chunk = load_batch(run_dir, cfg, path)
+    return Run(cfg, learners, chunk, batch.learner_table(cfg.train), read_metrics(run_dir, chunk))
+
+
+def load_params(run_dir: Path, path: Path | None = None) -> tuple[dict, list[tuple[str, int]]]:
+    """The trained network parameters of a run: a pytree with the learner axis first, and who each learner is.
+
+    Args:
+      run_dir: a run directory written by `reach_jax.train`.
+      path: a checkpoint to read instead of the newest.
+
+    Returns:
+      (params, learners): params as `network.init_params` builds them, each leaf (L, ...);
+      learners[i] = (condition, seed index) of learner i.
+    """
+    run = load(run_dir, path)
+    return run.batch.states.params, run.learners

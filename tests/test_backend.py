@@ -1,0 +1,58 @@
+"""Backend setup is explicit: importing the package changes nothing, and a flag a jaxlib rejects only warns."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax.numpy as jnp
+import pytest
+
+from reach_jax import distribute
+
+
+def _child(code: str) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    proc = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)], env=env, capture_output=True, text=True, timeout=300, check=False
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_imports_leave_the_environment_and_jax_alone_and_setup_sets_the_flags():
+    got = _child(
+        """
+        import json, os, warnings
+        from reach_jax import cli, distribute, evaluate, figures, rollout, train
+        after_import = (os.environ.get("XLA_FLAGS"), distribute.jax_started())
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            rejected = distribute.add_xla_flags(("--xla_reach_jax_no_such_flag=1",))
+        after_reject = os.environ.get("XLA_FLAGS")
+        distribute.setup_backend(2)
+        import jax, jax.numpy as jnp
+        total = float(jnp.arange(4.0).sum())
+        print(json.dumps({
+            "after_import": after_import, "rejected": rejected, "after_reject": after_reject,
+            "warnings": [str(w.message) for w in caught], "flags": os.environ.get("XLA_FLAGS"),
+            "devices": len(jax.devices()), "total": total,
+        }))
+        """
+    )
+    assert got["after_import"] == [None, False]
+    assert got["rejected"] is False and got["after_reject"] is None
+    assert len(got["warnings"]) == 1 and "rejects" in got["warnings"][0] and "no_such_flag" in got["warnings"][0]
+    assert got["flags"] == " ".join(distribute.CPU_XLA_FLAGS)
+    assert got["devices"] == 2 and got["total"] == 6.0
+
+
+def test_flags_asked_for_after_jax_started_warn_and_change_nothing(monkeypatch):
+    jnp.zeros(1).block_until_ready()
+    monkeypatch.delenv("XLA_FLAGS", raising=False)
+    with pytest.warns(UserWarning, match="JAX already started"):
+        assert distribute.add_xla_flags() is False
+    assert "XLA_FLAGS" not in os.environ
