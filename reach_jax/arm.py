@@ -11,6 +11,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from reach_jax import fields
 from reach_jax.config import ArmConfig
 
 
@@ -74,6 +75,17 @@ def jacobian(theta: jax.Array, cfg: ArmConfig) -> jax.Array:
     return jnp.array([[-l1 * s1 - l2 * s12, -l2 * s12], [l1 * c1 + l2 * c12, l2 * c12]])
 
 
+def inverse_jacobian(theta: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """J^-1: (2,) joint angles [rad] -> (2, 2) [rad/m], in closed form (adjugate over det J = l1 l2 sin theta2).
+
+    Closed form rather than a LAPACK solve: XLA:CPU runs batched LAPACK calls on its intra-op pool and waits
+    there for them, which with vmap over many states deadlocked the pool on 2 cores (every worker waiting).
+    """
+    j = jacobian(theta, cfg)
+    det = j[0, 0] * j[1, 1] - j[0, 1] * j[1, 0]
+    return jnp.array([[j[1, 1], -j[0, 1]], [-j[1, 0], j[0, 0]]]) / det
+
+
 def hand_velocity(state: jax.Array, cfg: ArmConfig) -> jax.Array:
     """(4,) arm state -> (2,) hand velocity [m/s]."""
     return jacobian(state[:2], cfg) @ state[2:]
@@ -89,19 +101,19 @@ def inverse_kinematics(hand: jax.Array, cfg: ArmConfig) -> jax.Array:
     return jnp.array([theta1, theta2])
 
 
-def external_force(state: jax.Array, field: jax.Array, force: jax.Array, cfg: ArmConfig) -> jax.Array:
-    """Hand force F = field @ xdot + force, (2,) [N].
+def external_force(state: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Hand force of the field at this arm state, (2,) [N] (`fields.hand_force`).
 
     Args:
       state: (4,) arm state.
-      field: (2, 2) viscous field matrix [N s/m]; zeros for no field.
-      force: (2,) constant hand force [N]; zeros for none.
+      field: the hand-force field.
+      force: (2,) this trial's random force [N].
       cfg: arm constants.
     """
-    return field @ hand_velocity(state, cfg) + force
+    return fields.hand_force(field, hand_position(state[:2], cfg), hand_velocity(state, cfg), force)
 
 
-def dsdt(state: jax.Array, tau: jax.Array, field: jax.Array, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+def dsdt(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
     """Time derivative of the (4,) arm state under (2,) motor torques [N m] and the hand force."""
     theta, omega = state[:2], state[2:]
     hand_force = external_force(state, field, force, cfg)
@@ -112,7 +124,7 @@ def dsdt(state: jax.Array, tau: jax.Array, field: jax.Array, force: jax.Array, c
     return jnp.concatenate([omega, acc])
 
 
-def rk4(state: jax.Array, tau: jax.Array, field: jax.Array, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+def rk4(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
     """One classical RK4 step of length cfg.dt; torque held, field evaluated in every stage."""
     dt = cfg.dt
     k1 = dsdt(state, tau, field, force, cfg)
@@ -136,7 +148,7 @@ def is_out(state: jax.Array, cfg: ArmConfig) -> jax.Array:
     return (state[0] < lo) | (state[0] > hi) | (state[1] < cfg.theta2_min)
 
 
-def step(state: jax.Array, tau: jax.Array, field: jax.Array, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+def step(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
     """RK4 step followed by the elbow stop: the arm's full transition over cfg.dt."""
     return elbow_stop(rk4(state, tau, field, force, cfg), cfg)
 

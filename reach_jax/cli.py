@@ -132,7 +132,12 @@ def build_train_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", type=Path, metavar="FILE", help="start from this config (JSON, as in config.json)")
     p.add_argument("--trials", type=_positive_int, help="trials per learner (2e6 in the paper)")
     p.add_argument("--seeds", type=_positive_int, help="networks per condition (2 in the paper)")
-    p.add_argument("--conditions", type=_conditions, help=f"comma-separated subset of {','.join(CONDITIONS)}")
+    p.add_argument(
+        "--conditions",
+        type=_conditions,
+        help=f"comma-separated names from the conditions table (the paper's: {','.join(CONDITIONS)}; add one with "
+        "--config FILE or --set conditions.NAME.FIELD=JSON)",
+    )
     p.add_argument("--seed", type=_non_negative_int, help="master PRNG seed (default 0)")
     p.add_argument("--chunk-steps", type=_positive_int, help="learner steps per compiled chunk")
     p.add_argument("--lr", type=_numbers, help="learning rate, or a comma-separated sweep grid")
@@ -167,7 +172,8 @@ def build_train_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="SECTION.FIELD=JSON",
-        help="set any config field, e.g. learner.lr=0.5 (after --config, before the flags above)",
+        help="set any config field, e.g. learner.lr=0.5 or conditions.curl.viscous=[[0,13],[-13,0]] "
+        "(after --config, before the flags above)",
     )
     p.add_argument("--out", type=Path, help="run directory (default runs/<name>)")
     p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a run from its newest checkpoint")
@@ -260,6 +266,9 @@ def _with_settings(data: dict, args) -> dict:
         if field in RETIRED_FIELDS.get(section, ()):
             raise UsageError(f"--set {section}.{field}: no longer a config field (a speed setting: see --help)")
         part = data.setdefault(section, {})
+        if section == "conditions":  # conditions.NAME.FIELD: a field of one condition, added if it is new
+            name, _, field = field.partition(".")
+            part = part.setdefault(name, {}) if isinstance(part, dict) else None
         if not isinstance(part, dict):
             raise UsageError(f"--set {section}.{field}: {section} is not a section")
         part[field] = value
@@ -410,7 +419,7 @@ def evaluate_main(argv=None) -> int:
     parser = build_evaluate_parser()
     try:
         args = parser.parse_args(argv)
-        distribute.setup_backend()
+        distribute.setup_backend(1)  # the evaluation runs on one device; more would only split its thread pool
         run = run_dir_io.load(args.run_dir, args.checkpoint)
     except (UsageError, CheckpointError) as exc:
         sys.stderr.write(error_line(parser.prog, str(exc)))

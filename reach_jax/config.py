@@ -104,15 +104,32 @@ class TaskConfig:
     # curriculum unchanged instead of shrinking it (choice; README "The curriculum")
 
 
-@dataclass(frozen=True)
-class ForceConfig:
-    """External hand forces (section 4.3, model §6)."""
+ZERO_MATRIX = ((0.0, 0.0), (0.0, 0.0))
 
-    viscous: tuple[tuple[float, float], tuple[float, float]] = (
-        (-10.1, -11.2),
-        (-11.2, 11.1),
-    )  # B [N s/m] of Shadmehr & Mussa-Ivaldi 1994, F = B xdot
-    random_amplitude: float = 8.0  # Fx, Fy ~ U(-a, a) per trial [N], section 4.3
+
+@dataclass(frozen=True)
+class ConditionConfig:
+    """A condition (section 4.3, model §6): the hand-force field a learner trains or is tested in, and its inputs.
+
+    The hand force is F = viscous @ xdot + stiffness @ (x - anchor) + constant + f, with f drawn uniformly in
+    [-random, random] per axis at the start of each trial (`fields`). Zeros everywhere is the null field.
+    """
+
+    name: str = ""  # how --conditions and eval.test_conditions refer to it
+    viscous: tuple[tuple[float, float], tuple[float, float]] = ZERO_MATRIX  # B [N s/m], F = B xdot
+    stiffness: tuple[tuple[float, float], tuple[float, float]] = ZERO_MATRIX  # K [N/m], F = K (x - anchor)
+    anchor: tuple[float, float] = (0.0, 0.0)  # x0 of the spring [m], shoulder frame
+    constant: tuple[float, float] = (0.0, 0.0)  # a force present in every trial [N]
+    random: tuple[float, float] = (0.0, 0.0)  # bound of the per-trial random force per axis [N]
+    past_inputs: bool = True  # False withholds the 60 one-step-before inputs (the no-past ablation)
+
+
+PAPER_CONDITIONS = (
+    ConditionConfig("none"),
+    ConditionConfig("viscous", viscous=((-10.1, -11.2), (-11.2, 11.1))),  # B of Shadmehr & Mussa-Ivaldi 1994
+    ConditionConfig("random", random=(8.0, 8.0)),  # Fx, Fy ~ U(-8, 8) N per trial, section 4.3
+    ConditionConfig("random_nopast", random=(8.0, 8.0), past_inputs=False),  # section 4.3, without past inputs
+)
 
 
 @dataclass(frozen=True)
@@ -127,6 +144,7 @@ class EvalConfig:
     impedance_pair_stride: int = 4  # impedance at every 4th lattice pair's movement: 260 of 1040 (choice, cost)
     impedance_max_steps: int = 50  # and at its first 50 acting states (1 s), where movements happen (choice)
     impedance_min_sin_elbow: float = 0.2  # states with sin(theta2) below this (J near singular) are skipped (choice)
+    test_conditions: tuple[str, ...] = ("none", "viscous")  # Table 2 columns: the conditions every network is tested in
 
 
 @dataclass(frozen=True)
@@ -148,8 +166,7 @@ class ClaimsConfig:
     curriculum_max_setbacks: float = 0.01  # a learner is stable with at most 1% of its tail chunks set back
 
 
-CONDITIONS = ("none", "viscous", "random", "random_nopast")  # Table 2 rows
-TEST_CONDITIONS = ("none", "viscous")  # Table 2 columns
+CONDITIONS = tuple(c.name for c in PAPER_CONDITIONS)  # Table 2 rows
 
 
 @dataclass(frozen=True)
@@ -158,7 +175,7 @@ class TrainConfig:
 
     trials: int = 2_000_000  # trials per learner, section 4.4
     seeds: int = 2  # networks per condition, section 4.4
-    conditions: tuple[str, ...] = CONDITIONS  # learning conditions, Table 2 rows
+    conditions: tuple[str, ...] = CONDITIONS  # learning conditions (names in Config.conditions), Table 2 rows
     seed: int = 0  # master PRNG seed
     chunk_steps: int = 50_000  # learner steps per compiled chunk; checkpoint and log between chunks
     lr_grid: tuple[float, ...] = ()  # sweep: learning rates, crossed with the other grids; () = learner.lr
@@ -180,15 +197,17 @@ class Config:
     network: NetworkConfig = field(default_factory=NetworkConfig)
     learner: LearnerConfig = field(default_factory=LearnerConfig)
     task: TaskConfig = field(default_factory=TaskConfig)
-    force: ForceConfig = field(default_factory=ForceConfig)
     eval: EvalConfig = field(default_factory=EvalConfig)
     claims: ClaimsConfig = field(default_factory=ClaimsConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
+    conditions: tuple[ConditionConfig, ...] = PAPER_CONDITIONS  # the named conditions; JSON: {name: fields}
 
 
 def to_dict(config: Config) -> dict:
-    """Config as a JSON-ready dict, with the config version."""
-    return {"version": CONFIG_VERSION, **dataclasses.asdict(config)}
+    """Config as a JSON-ready dict, with the config version; conditions as an object keyed by name."""
+    data = dataclasses.asdict(config)
+    data["conditions"] = {c.pop("name"): c for c in data["conditions"]}
+    return {"version": CONFIG_VERSION, **data}
 
 
 def tuplify(value):
@@ -205,7 +224,7 @@ def _check_type(name: str, value, default):
         ok = isinstance(value, (int, float)) and math.isfinite(value)
     elif isinstance(default, tuple):
         # Grids and the condition list have free length and a fixed element type; other tuples match the default.
-        free_length = name.endswith(("grid", "conditions"))
+        free_length = name.endswith(("grid", "conditions"))  # train.conditions, eval.test_conditions
         ok = isinstance(value, tuple) and (free_length or len(value) == len(default))
         if ok and free_length:
             ok = all(isinstance(v, str if name.endswith("conditions") else (int, float)) for v in value)
@@ -221,33 +240,92 @@ def _check_type(name: str, value, default):
         )
 
 
+def _coerce(value, default):
+    """value (type-checked against default) with ints made floats wherever the default holds a float."""
+    if isinstance(default, tuple) and len(default) == len(value):  # free-length tuples (grids, names) stay
+        return tuple(_coerce(v, d) for v, d in zip(value, default, strict=True))
+    return float(value) if isinstance(default, float) else value
+
+
+def _build(cls, raw, where: str, base=None):
+    """cls with the fields of the JSON object `raw` written over `base` (default cls()), each checked by type."""
+    if not isinstance(raw, dict):
+        raise ValueError(f"{where}: expected an object")
+    base = cls() if base is None else base
+    names = {g.name for g in dataclasses.fields(cls)}
+    values = {}
+    for key, value in raw.items():
+        if key not in names or key == "name":
+            raise ValueError(f"{where}.{printable(key)}: unknown field")
+        value = tuplify(value)
+        _check_type(f"{where}.{key}", value, getattr(base, key))
+        values[key] = _coerce(value, getattr(base, key))
+    return dataclasses.replace(base, **values)
+
+
+@dataclass(frozen=True)
+class _RetiredForce:
+    """The `force` section that configs stored before conditions were data."""
+
+    viscous: tuple[tuple[float, float], tuple[float, float]] = PAPER_CONDITIONS[1].viscous
+    random_amplitude: float = PAPER_CONDITIONS[2].random[0]
+
+
+def _migrate_force(raw: dict, table: dict) -> dict:
+    """Conditions table of a config stored before conditions were data: its `force` section, which held the
+    viscous matrix and the random-force bound, written into the paper's conditions."""
+    force = _build(_RetiredForce, raw, "force")
+    table["viscous"] = dataclasses.replace(table["viscous"], viscous=force.viscous)
+    for name in ("random", "random_nopast"):
+        table[name] = dataclasses.replace(table[name], random=(force.random_amplitude,) * 2)
+    return table
+
+
+def _conditions(raw, table: dict) -> tuple[ConditionConfig, ...]:
+    """The conditions table: the paper's four, with the entries of `raw` ({name: fields}) added or changed."""
+    if not isinstance(raw, dict):
+        raise ValueError("conditions: expected an object of name: fields")
+    for name, fields in raw.items():
+        if not name or any(c in name for c in ", ") or not name.isprintable():
+            raise ValueError(f"conditions.{printable(name)}: a name needs letters, without commas or spaces")
+        table[name] = _build(ConditionConfig, fields, f"conditions.{name}", table.get(name, ConditionConfig(name)))
+    return tuple(table.values())
+
+
 def from_dict(data: dict) -> Config:
-    """Rebuild a Config from `to_dict` output; raises ValueError naming a bad or unknown field."""
+    """Rebuild a Config from `to_dict` output; raises ValueError naming a bad or unknown field.
+
+    Fields that are left out keep their defaults; a condition given in `conditions` is added to the paper's
+    four, or changes the fields it names of one of them.
+    """
     data = dict(data)
     version = data.pop("version", None)
     if version != CONFIG_VERSION:
         raise ValueError(f"version: expected {CONFIG_VERSION}, found {version}")
+    table = {c.name: c for c in PAPER_CONDITIONS}
+    if "force" in data:
+        table = _migrate_force(data.pop("force"), table)
     sections = {}
     for f in dataclasses.fields(Config):
-        cls = f.default_factory
+        if f.name == "conditions":
+            continue
         raw = data.pop(f.name, {})
-        if not isinstance(raw, dict):
-            raise ValueError(f"{f.name}: expected an object")
-        defaults = cls()
-        values = {}
-        raw = {k: v for k, v in raw.items() if k not in RETIRED_FIELDS.get(f.name, ())}
-        for key, value in raw.items():
-            if key not in {g.name for g in dataclasses.fields(cls)}:
-                raise ValueError(f"{f.name}.{printable(key)}: unknown field")
-            value = tuplify(value)
-            _check_type(f"{f.name}.{key}", value, getattr(defaults, key))
-            values[key] = float(value) if isinstance(getattr(defaults, key), float) else value
-        sections[f.name] = cls(**values)
+        if isinstance(raw, dict):
+            raw = {k: v for k, v in raw.items() if k not in RETIRED_FIELDS.get(f.name, ())}
+        sections[f.name] = _build(f.default_factory, raw, f.name)
+    conditions = _conditions(data.pop("conditions", {}), table)
     if data:
         raise ValueError(f"{printable(sorted(data)[0])}: unknown field")
-    _check_train(sections["train"])
+    _check_train(sections["train"], conditions)
     _check_learner(sections["learner"])
-    return Config(**sections)
+    _check_names("eval.test_conditions", sections["eval"].test_conditions, conditions)
+    return Config(**sections, conditions=conditions)
+
+
+def _check_names(where: str, names: tuple[str, ...], conditions: tuple[ConditionConfig, ...]) -> None:
+    known = [c.name for c in conditions]
+    if not names or len(set(names)) != len(names) or any(n not in known for n in names):
+        raise ValueError(f"{where}: must be distinct names from {', '.join(known)}")
 
 
 def _check_learner(learner: LearnerConfig) -> None:
@@ -256,16 +334,14 @@ def _check_learner(learner: LearnerConfig) -> None:
             raise ValueError(f"learner.{name}: must not be negative")
 
 
-def _check_train(train: TrainConfig) -> None:
+def _check_train(train: TrainConfig, conditions: tuple[ConditionConfig, ...]) -> None:
     for name in ("trials", "seeds", "chunk_steps"):
         if getattr(train, name) < 1:
             raise ValueError(f"train.{name}: must be at least 1")
     for name in ("seed", "keep_every"):
         if getattr(train, name) < 0:
             raise ValueError(f"train.{name}: must not be negative")
-    bad = [c for c in train.conditions if c not in CONDITIONS]
-    if bad or not train.conditions or len(set(train.conditions)) != len(train.conditions):
-        raise ValueError(f"train.conditions: must be distinct names from {', '.join(CONDITIONS)}")
+    _check_names("train.conditions", train.conditions, conditions)
     for name in ("lr_grid", "noise_grid", "lam_grid", "noise_final_ratio_grid", "noise_anneal_trials_grid"):
         if not all(math.isfinite(v) and v > 0 for v in getattr(train, name)):
             raise ValueError(f"train.{name}: must hold positive numbers")
@@ -304,3 +380,11 @@ def n_past_inputs(config: Config) -> int:
     """Number of one-step-before inputs withheld by the no-past ablation (60 for the paper)."""
     e = config.encoding
     return sum(e.theta_units) + 2 * e.omega_units + 2 * e.tau_units
+
+
+def condition(cfg: Config, name: str) -> ConditionConfig:
+    """The condition called `name`; raises ValueError naming the known ones."""
+    for c in cfg.conditions:
+        if c.name == name:
+            return c
+    raise ValueError(f"unknown condition {name!r}; choose from {', '.join(c.name for c in cfg.conditions)}")

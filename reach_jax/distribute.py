@@ -7,7 +7,6 @@ here runs at import; the command lines call `setup_backend` before JAX's first c
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import os
 import subprocess
@@ -111,12 +110,11 @@ def setup_backend(devices: int | None = None, cluster: Cluster | None = None) ->
         A process that cannot reach the others within `init_timeout` is ended by jax itself (SIGABRT).
     """
     add_xla_flags()
-    if devices is not None:
-        jax.config.update("jax_num_cpu_devices", devices)
-    else:
-        # Too late once JAX has computed (e.g. when called in-process); the default device then stays.
-        with contextlib.suppress(RuntimeError):
-            jax.config.update("jax_num_cpu_devices", available_cores())
+    try:
+        jax.config.update("jax_num_cpu_devices", available_cores() if devices is None else devices)
+    except RuntimeError:  # JAX has already computed (called in-process, e.g. from a notebook): keep its devices
+        if devices is not None and devices != len(jax.local_devices(backend="cpu")):
+            warnings.warn(f"JAX already started; keeping its CPU devices, not {devices}", stacklevel=2)
     if cluster is not None:
         try:
             jax.distributed.initialize(

@@ -19,6 +19,7 @@ import jax.numpy as jnp
 
 from reach_jax import arm, network, task
 from reach_jax.config import Config
+from reach_jax.fields import Field
 
 # Outcome codes of an episode.
 SUCCESS, OUT, FAIL = 0, 1, 2
@@ -75,14 +76,14 @@ def observation(state, prev, prev_tau, target, start, t, mask, cfg: Config) -> O
     )
 
 
-def run_episode(policy, params, mask: jax.Array, field: jax.Array, start: jax.Array, target: jax.Array, cfg: Config):
+def run_episode(policy, params, mask: jax.Array, field: Field, start: jax.Array, target: jax.Array, cfg: Config):
     """One noise-free test episode from rest at `start`.
 
     Args:
       policy: (params, Obs) -> (2,) torque [N m].
       params: the policy's parameters.
       mask: (125,) input mask of the learning condition.
-      field: (2, 2) viscous field of the test condition [N s/m].
+      field: the hand-force field of the test condition; no per-trial random force is drawn in a test.
       start: (2,) start hand position [m].
       target: (2,) target position [m].
       cfg: model config.
@@ -137,7 +138,7 @@ def run_episodes(policy, params, masks, fields, starts, targets, cfg: Config) ->
       policy: (params, Obs) -> (2,) torque [N m]; must be hashable (a module-level or cached function).
       params: policy parameters with a leading network axis N.
       masks: (N, 125) input masks of the networks' learning conditions.
-      fields: (C, 2, 2) viscous fields of the test conditions [N s/m].
+      fields: the hand-force fields of the C test conditions, stacked (`evaluate.test_fields`).
       starts: (P, 2) start positions [m].
       targets: (P, 2) target positions [m].
       cfg: model config.
@@ -146,7 +147,7 @@ def run_episodes(policy, params, masks, fields, starts, targets, cfg: Config) ->
       (Episode, Trajectory), leading axes (N, C, P).
     """
     run = _compiled(policy, cfg)
-    return run(params, jnp.asarray(masks), jnp.asarray(fields), jnp.asarray(starts), jnp.asarray(targets))
+    return run(params, jnp.asarray(masks), jax.tree.map(jnp.asarray, fields), jnp.asarray(starts), jnp.asarray(targets))
 
 
 @functools.cache

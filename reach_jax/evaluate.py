@@ -47,9 +47,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, claims, figures, impedance, sensor, stats, task
+from reach_jax import batch, checkpoint, claims, fields, figures, impedance, sensor, stats, task
 from reach_jax import run_dir as run_dir_io
-from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config
+from reach_jax.config import Config
 from reach_jax.episodes import FAIL, OUTCOME_NAMES, SUCCESS, Episode, n_steps, network_policy, run_episodes
 from reach_jax.panels import CORNER_NAMES, FIG4_PANELS, corner_pairs
 
@@ -82,9 +82,9 @@ def test_pairs(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     return starts[keep], targets[keep]
 
 
-def test_fields(cfg: Config) -> jax.Array:
-    """(C, 2, 2) viscous fields [N s/m] of TEST_CONDITIONS."""
-    return jnp.stack([task.make_condition(name, cfg).field for name in TEST_CONDITIONS])
+def test_fields(cfg: Config) -> fields.Field:
+    """The hand-force fields of cfg.eval.test_conditions, stacked along a leading axis."""
+    return jax.tree.map(lambda *f: jnp.stack(f), *(task.make_condition(n, cfg).field for n in cfg.eval.test_conditions))
 
 
 def trial_times(outcome: np.ndarray, steps: np.ndarray, cfg: Config) -> np.ndarray:
@@ -117,7 +117,7 @@ def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int
     """Table 2 as a JSON-ready dict: counts summed over each learning condition's networks, and per network.
 
     Args:
-      outcome: (N, C, 1040) outcome codes, networks in `learners` order, tests in TEST_CONDITIONS order.
+      outcome: (N, C, 1040) outcome codes, networks in `learners` order, tests in cfg.eval.test_conditions order.
       steps: (N, C, 1040) episode lengths [steps].
       learners: (learning condition, seed index) per network.
       recipe_of: (N,) recipe index per network (`recipe_index`).
@@ -128,20 +128,20 @@ def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int
       "per_network": one row per network and test, "pairs_per_network"}.
     """
     rows, first_two, per_network = [], [], []
-    present = [c for c in CONDITIONS if any(c == name for name, _ in learners)]
+    present = [c.name for c in cfg.conditions if any(c.name == name for name, _ in learners)]
     for learning in present:
         nets = [i for i, (name, _) in enumerate(learners) if name == learning]
-        for j, test in enumerate(TEST_CONDITIONS):
+        for j, test in enumerate(cfg.eval.test_conditions):
             cell = count(outcome[nets, j], steps[nets, j], cfg)
             rows.append({"learning": learning, "test": test, "networks": len(nets), **cell})
     for k in sorted(set(recipe_of)):
         for learning in present:
             nets = [i for i, (name, s) in enumerate(learners) if name == learning and s < 2 and recipe_of[i] == k]
-            for j, test in enumerate(TEST_CONDITIONS):
+            for j, test in enumerate(cfg.eval.test_conditions):
                 cell = count(outcome[nets, j], steps[nets, j], cfg)
                 first_two.append({"learning": learning, "test": test, "recipe": k, "networks": len(nets), **cell})
     for i, (learning, seed) in enumerate(learners):
-        for j, test in enumerate(TEST_CONDITIONS):
+        for j, test in enumerate(cfg.eval.test_conditions):
             cell = count(outcome[i, j], steps[i, j], cfg)
             per_network.append(
                 {"learner": i, "learning": learning, "seed": seed, "recipe": recipe_of[i], "test": test, **cell}
@@ -189,11 +189,17 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
         for cell in recipe["cells"]:
             first = sums.get((cell["learning"], cell["test"], k))
             ours01 = _cell(first["success"], first["out"], first["fail"], first["mean_time_s"]) if first else "–"
-            near = " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
+            key = (cell["learning"], cell["test"])
+            paper = _cell(*claims.PAPER_TABLE2[key]) if key in claims.PAPER_TABLE2 else "–"
+            near = (
+                " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
+                if cell["near_paper"]
+                else "–"
+            )
             lines.append(
                 f"| {cell['learning']} → {cell['test']} | {_interval(cell['success'])} | {_interval(cell['out'])} | "
                 f"{_interval(cell['mean_time_s'], 1.0, 2)} | {ours01} | "
-                f"{_cell(*claims.PAPER_TABLE2[(cell['learning'], cell['test'])])} | {near} |"
+                f"{paper} | {near} |"
             )
     return "\n".join(lines) + "\n"
 
@@ -449,9 +455,9 @@ def quality(ep: Episode, learners, starts: np.ndarray, targets: np.ndarray, cfg:
       cfg: model config.
     """
     cells = []
-    for learning in [c for c in CONDITIONS if any(c == name for name, _ in learners)]:
+    for learning in [c.name for c in cfg.conditions if any(c.name == name for name, _ in learners)]:
         nets = [i for i, (name, _) in enumerate(learners) if name == learning]
-        for j, test in enumerate(TEST_CONDITIONS):
+        for j, test in enumerate(cfg.eval.test_conditions):
             sub = Episode(*(np.concatenate([np.asarray(a)[i, j] for i in nets]) for a in ep))
             reps = len(nets)
             cells.append(
@@ -573,19 +579,26 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
                 return i
         return None
 
+    tests = cfg.eval.test_conditions
     panels = {}
     for letter, learning, test in FIG4_PANELS:
         i = net_index(learning, cfg.eval.figure_seed, 0)
-        if i is not None:
-            panels[letter] = Episode(*(a[i, TEST_CONDITIONS.index(test)] for a in corners))
-    viscous = np.asarray(task.make_condition("viscous", cfg).field)
+        if i is not None and test in tests:
+            panels[letter] = Episode(*(a[i, tests.index(test)] for a in corners))
+    viscous = np.asarray(task.make_condition("viscous", cfg).field.viscous)  # the float32 matrix the arm felt
     per_seed = []
     for k in range(len(recipes)):
         for seed in range(cfg.train.seeds):
             i, j = net_index("none", seed, k), net_index("viscous", seed, k)
-            if i is None or j is None:
+            if i is None or j is None or not {"none", "viscous"} <= set(tests):
                 continue
-            hands = {"a": corners.hand[i, 0], "b": corners.hand[i, 1], "c": corners.hand[j, 0], "d": corners.hand[j, 1]}
+            off, on = tests.index("none"), tests.index("viscous")
+            hands = {
+                "a": corners.hand[i, off],
+                "b": corners.hand[i, on],
+                "c": corners.hand[j, off],
+                "d": corners.hand[j, on],
+            }
             per_seed.append({"recipe": k, "seed": seed, **aftereffect(hands, c_starts, c_targets, c_corner, viscous)})
     main = [a for a in per_seed if a["recipe"] == 0 and a["seed"] == cfg.eval.figure_seed]
     after = (
@@ -594,7 +607,7 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
         else {"error": "needs the none and viscous learning conditions at seed cfg.eval.figure_seed"}
     )
     gains = impedance.measure(policy, params, masks, lattice, lattice_traj, starts, targets, cfg)
-    imp = impedance.summarize(gains, data.learners, TEST_CONDITIONS, viscous)
+    imp = impedance.summarize(gains, data.learners, cfg.eval.test_conditions, viscous)
     for row in imp["per_network"]:
         row["recipe"] = recipe_of[row["learner"]]
     verdicts = []

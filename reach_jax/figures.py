@@ -12,7 +12,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Rectangle
 
 from reach_jax import sensor, task
-from reach_jax.config import CONDITIONS, Config
+from reach_jax.config import Config
 from reach_jax.episodes import OUTCOME_NAMES, SUCCESS
 from reach_jax.panels import CORNER_NAMES, FIG4_PANELS, FIG5_PANELS
 
@@ -24,8 +24,15 @@ CORNER_STYLE = {
     "upper left": dict(marker="s", color="tab:green"),
     "upper right": dict(marker="x", color="tab:purple"),
 }
-CONDITION_COLOR = dict(zip(CONDITIONS, ("tab:blue", "tab:red", "tab:green", "tab:orange"), strict=True))
+# Colours of the conditions, in the order of cfg.conditions (the paper's four first), then round again.
+PALETTE = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
 SEED_STYLE = ("-", "--", ":", "-.")
+
+
+def condition_color(name: str, cfg: Config) -> str:
+    """The colour of a condition in every figure."""
+    names = [c.name for c in cfg.conditions]
+    return PALETTE[names.index(name) % len(PALETTE)] if name in names else "k"
 
 
 def _panel_title(letter: str, learning: str, test: str) -> str:
@@ -154,7 +161,7 @@ def learning_curves(metrics: list[dict], cfg: Config):
             ax.plot(
                 [r["trials"] for r in rows],
                 [r[key] for r in rows],
-                color=CONDITION_COLOR.get(cond, "k"),
+                color=condition_color(cond, cfg),
                 ls=SEED_STYLE[seed % len(SEED_STYLE)],
                 lw=1.0,
                 marker=".",  # a run with a single chunk still shows its one point
@@ -209,10 +216,10 @@ def impedance(summary: dict, gains: dict, learners, cfg: Config):
                 mats = [np.asarray(r[key]["median"]) for r in rows if r["learning"] == cond]
                 for m in mats:
                     e = _ellipse(m)
-                    ax.plot(e[:, 0], e[:, 1], color=CONDITION_COLOR.get(cond, "k"), lw=0.5, alpha=0.5)
+                    ax.plot(e[:, 0], e[:, 1], color=condition_color(cond, cfg), lw=0.5, alpha=0.5)
                 if mats:
                     e = _ellipse(np.median(mats, axis=0))
-                    ax.plot(e[:, 0], e[:, 1], color=CONDITION_COLOR.get(cond, "k"), lw=2.2, label=cond)
+                    ax.plot(e[:, 0], e[:, 1], color=condition_color(cond, cfg), lw=2.2, label=cond)
             if col == 1:
                 valid = gains["valid"][:, row]
                 passive = np.median(gains["passive"][:, row][valid], axis=0) if valid.any() else np.zeros((2, 2))
@@ -245,7 +252,7 @@ def impedance(summary: dict, gains: dict, learners, cfg: Config):
                     vals,
                     marker=marker,
                     s=18,
-                    color=CONDITION_COLOR.get(cond, "k"),
+                    color=condition_color(cond, cfg),
                     facecolors="none" if name == "stable" else None,
                     label=f"{name} axis" if k == 0 else None,
                 )

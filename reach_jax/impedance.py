@@ -53,13 +53,13 @@ def hand_gains(policy, params, mask, state, prev, prev_tau, target, start, t, cf
 
     zero = jnp.zeros(2, state.dtype)
     dtau_dq, dtau_dqdot = jax.jacfwd(torque, argnums=(0, 1))(zero, zero)
-    jinv = jnp.linalg.inv(arm.jacobian(state[:2], cfg.arm))
+    jinv = arm.inverse_jacobian(state[:2], cfg.arm)
     return -jinv.T @ dtau_dq @ jinv, -jinv.T @ dtau_dqdot @ jinv
 
 
 def passive_damping(state: jax.Array, cfg: Config) -> jax.Array:
     """(2, 2) hand damping [N s/m] of the arm's own joint viscosity (Table 1) at `state` (4,)."""
-    jinv = jnp.linalg.inv(arm.jacobian(state[:2], cfg.arm))
+    jinv = arm.inverse_jacobian(state[:2], cfg.arm)
     return jinv.T @ jnp.diag(jnp.asarray(cfg.arm.joint_viscosity)) @ jinv
 
 

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from reach_jax.config import CONDITIONS, ArmConfig, Config, LearnerConfig, SensorConfig
+from reach_jax.config import ArmConfig, ConditionConfig, Config, LearnerConfig, SensorConfig, condition
 
 # ---------------------------------------------------------------------------------------------------------------
 # Arm (eq. 4-5, model §1)
@@ -101,19 +101,23 @@ def inertia_matrix(theta, cfg: ArmConfig) -> np.ndarray:
     return np.array([[a11, a12], [a21, a22]])
 
 
-def hand_force(state, field, force, cfg: ArmConfig) -> np.ndarray:
-    """External hand force F = B xdot + F_const.
+def hand_force(state, field: ConditionConfig, force, cfg: ArmConfig) -> np.ndarray:
+    """External hand force F = B xdot + K (x - x0) + F_const + F_trial.
 
-    Args: state (4,), field (2, 2) [N s/m], force (2,) [N].
+    Args: state (4,), field a ConditionConfig (viscous [N s/m], stiffness [N/m], anchor [m], constant [N]),
+      force (2,) this trial's random force [N].
     Returns: (2,) [N].
     """
-    return np.asarray(field, dtype=np.float64) @ hand_velocity(state, cfg) + np.asarray(force, dtype=np.float64)
+    b, k = (np.asarray(m, dtype=np.float64) for m in (field.viscous, field.stiffness))
+    hand = hand_position(state[:2], cfg)
+    spring = k @ (hand - np.asarray(field.anchor, dtype=np.float64))
+    return b @ hand_velocity(state, cfg) + spring + np.asarray(field.constant) + np.asarray(force, dtype=np.float64)
 
 
 def dsdt(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
     """Eq. 4-5 solved for the accelerations.
 
-    Args: state (4,), tau (2,) [N m], field (2, 2) [N s/m], force (2,) [N].
+    Args: state (4,), tau (2,) [N m], field a ConditionConfig, force (2,) [N].
     Returns: (4,) [rad/s, rad/s^2].
     """
     m2, l1, _, s2, _, _ = _links(cfg)
@@ -162,7 +166,7 @@ def elbow_stop(state, cfg: ArmConfig) -> np.ndarray:
 def arm_step(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
     """RK4 step then elbow stop.
 
-    Args: state (4,), tau (2,) [N m], field (2, 2) [N s/m], force (2,) [N].
+    Args: state (4,), tau (2,) [N m], field a ConditionConfig, force (2,) [N].
     Returns: (4,).
     """
     return elbow_stop(rk4(state, tau, field, force, cfg), cfg)
@@ -496,22 +500,18 @@ def ts_update(layers, x_now, pending: Pending, n_max: float, lr: float, cfg: Con
 class Condition(NamedTuple):
     """One learner's environment."""
 
-    field: np.ndarray  # (2, 2) viscous field [N s/m]
-    force_amplitude: float  # random force bound per axis [N]
+    field: ConditionConfig  # the hand-force field (its name and past_inputs aside)
     input_mask: np.ndarray  # (125,) 0/1
 
 
 def make_condition(name: str, cfg: Config) -> Condition:
-    """Condition for a Table-2 name.
+    """Condition of the config's conditions table called `name`.
 
-    Args: name one of CONDITIONS.
+    Args: name a condition of cfg.conditions.
     Returns: a Condition.
     """
-    if name not in CONDITIONS:
-        raise ValueError(f"unknown condition {name!r}")
-    field = np.array(cfg.force.viscous, dtype=np.float64) if name == "viscous" else np.zeros((2, 2))
-    amplitude = cfg.force.random_amplitude if name in ("random", "random_nopast") else 0.0
-    return Condition(field, amplitude, input_mask(name != "random_nopast", cfg))
+    spec = condition(cfg, name)
+    return Condition(spec, input_mask(spec.past_inputs, cfg))
 
 
 class Draws(NamedTuple):
@@ -550,10 +550,10 @@ def curriculum_bounds(cfg: Config) -> tuple[float, float]:
     return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
 
 
-def place_trial(draws: Draws, distance: float, amplitude: float, cfg: Config):
-    """Start state at rest, target and constant force.
+def place_trial(draws: Draws, distance: float, field: ConditionConfig, cfg: Config):
+    """Start state at rest, target and the trial's random force.
 
-    Args: draws, distance () [m], amplitude () [N].
+    Args: draws, distance () [m], field (its per-axis random bound [N]).
     Returns: ((4,), (2,) [m], (2,) [N]).
     """
     (x0, y0), (x1, y1) = field_bounds(cfg.sensor)
@@ -571,7 +571,7 @@ def place_trial(draws: Draws, distance: float, amplitude: float, cfg: Config):
     if target is None:  # every candidate touches: take the last
         target = box_lo + cands[-1] * (box_hi - box_lo)
     state = np.concatenate([inverse_kinematics(start, cfg.arm), np.zeros(2)])
-    force = np.array([amplitude * (2.0 * u - 1.0) for u in draws.force])
+    force = np.array([a * (2.0 * u - 1.0) for a, u in zip(field.random, draws.force, strict=True)])
     return state, target, force
 
 
@@ -707,7 +707,7 @@ def learner_step(lrn: Learner, cond: Condition, lr: float, lam: float, rnd, draw
     if done:
         new.distance = update_curriculum(lrn.distance, goal, lrn.drifted, lrn.was_full, cfg)
         new.was_full = lrn.was_full or new.distance >= curriculum_bounds(cfg)[1]
-        start, target, force = place_trial(draws, new.distance, cond.force_amplitude, cfg)
+        start, target, force = place_trial(draws, new.distance, cond.field, cfg)
         new.arm, new.prev_arm, new.prev_tau = start, start.copy(), np.zeros(2)
         new.target, new.force, new.t, new.drifted = target, force, 0, False
         new.trials = lrn.trials + 1
@@ -735,7 +735,7 @@ def init_learner(rng: np.random.Generator, cond: Condition, cfg: Config) -> Lear
     """
     n_in = cond.input_mask.shape[0]
     distance = curriculum_bounds(cfg)[0]
-    start, target, force = place_trial(draw_trial(rng, cfg), distance, cond.force_amplitude, cfg)
+    start, target, force = place_trial(draw_trial(rng, cfg), distance, cond.field, cfg)
     return Learner(
         layers=init_layers(rng, cfg),
         arm=start,

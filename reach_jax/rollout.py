@@ -139,7 +139,7 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
     """Fresh learner: new weights, first trial at the initial curriculum distance."""
     k_param, k_trial, k_run = jax.random.split(key, 3)
     distance, full = (jnp.asarray(b) for b in task.curriculum_bounds(cfg))
-    start, target, force = task.place_trial(task.draw_trial(k_trial, cfg), distance, cond.force_amplitude, cfg)
+    start, target, force = task.place_trial(task.draw_trial(k_trial, cfg), distance, cond.field, cfg)
     return LearnerState(
         params=network.init_params(k_param, cfg),
         key=k_run,
@@ -257,7 +257,7 @@ def learner_step(
     )
     first_full = ~was_full & (distance >= task.curriculum_bounds(cfg)[1])
     full_at = jnp.where(first_full, state.trials + done, state.full_at)
-    start, new_target, force = task.place_trial(draws, distance, cond.force_amplitude, cfg)
+    start, new_target, force = task.place_trial(draws, distance, cond.field, cfg)
     fresh = dict(
         arm=start,
         prev_arm=start,

@@ -1,6 +1,6 @@
 """The reaching task: conditions, trial sampling, goal test, target drift and curriculum (model §2, §5, §6).
 
-Units: positions and distances [m], speeds [m/s], forces [N], field matrices [N s/m], time [s].
+Units: positions and distances [m], speeds [m/s], forces [N], time [s]; fields are `fields.Field` data.
 Randomness enters only through uniform draws in [0, 1) (`TrialDraws`), so a NumPy oracle can replay a run.
 The curriculum distance d bounds the start-target offset in each axis (an L-inf box).
 """
@@ -13,30 +13,22 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from reach_jax import arm, encoding, sensor
-from reach_jax.config import CONDITIONS, Config
+from reach_jax import arm, encoding, fields, sensor
+from reach_jax.config import Config, condition
 
 
 @struct.dataclass
 class Condition:
     """One learner's environment and inputs: per-learner data, never a Python branch."""
 
-    field: jax.Array  # (2, 2) viscous field matrix [N s/m]; zeros for none
-    force_amplitude: jax.Array  # () random constant force bound per axis [N]; 0 for none
+    field: fields.Field  # the hand-force field
     input_mask: jax.Array  # (125,) 1 keeps an input, 0 withholds it
 
 
 def make_condition(name: str, cfg: Config) -> Condition:
-    """Condition for a Table-2 learning or test name: none, viscous, random, random_nopast."""
-    if name not in CONDITIONS:
-        raise ValueError(f"unknown condition {name!r}; choose from {', '.join(CONDITIONS)}")
-    viscous = jnp.asarray(cfg.force.viscous) * float(name == "viscous")
-    amplitude = cfg.force.random_amplitude * float(name.startswith("random"))
-    return Condition(
-        field=viscous,
-        force_amplitude=jnp.asarray(amplitude),
-        input_mask=encoding.input_mask(name != "random_nopast", cfg),
-    )
+    """Condition of the config's conditions table called `name` (the paper's: none, viscous, random, random_nopast)."""
+    spec = condition(cfg, name)
+    return Condition(field=fields.make_field(spec), input_mask=encoding.input_mask(spec.past_inputs, cfg))
 
 
 def stack_conditions(names, cfg: Config) -> Condition:
@@ -78,7 +70,7 @@ def goal_reached(hand: jax.Array, hand_vel: jax.Array, target: jax.Array, cfg: C
     return touching(hand, target, cfg) & (jnp.linalg.norm(hand_vel) < cfg.task.goal_speed)
 
 
-def place_trial(draws: TrialDraws, distance: jax.Array, amplitude: jax.Array, cfg: Config):
+def place_trial(draws: TrialDraws, distance: jax.Array, field: fields.Field, cfg: Config):
     """Start state, target and force of a new trial.
 
     The start is uniform over the field. Each target candidate is uniform over the field intersected
@@ -88,11 +80,11 @@ def place_trial(draws: TrialDraws, distance: jax.Array, amplitude: jax.Array, cf
     Args:
       draws: uniform draws of the trial.
       distance: () curriculum distance [m].
-      amplitude: () random force bound [N].
+      field: the learner's field, which bounds the trial's random force.
       cfg: model config.
 
     Returns:
-      ((4,) start arm state at rest, (2,) target [m], (2,) constant force [N]).
+      ((4,) start arm state at rest, (2,) target [m], (2,) the trial's random force [N]).
     """
     lo, hi = (jnp.asarray(b) for b in sensor.field_bounds(cfg.sensor))
     start = lo + draws.start * (hi - lo)
@@ -103,7 +95,7 @@ def place_trial(draws: TrialDraws, distance: jax.Array, amplitude: jax.Array, cf
     first = jnp.where(jnp.any(ok), jnp.argmax(ok), cfg.task.target_candidates - 1)
     target = candidates[first]
     state = jnp.concatenate([arm.inverse_kinematics(start, cfg.arm), jnp.zeros(2)])
-    force = amplitude * (2.0 * draws.force - 1.0)
+    force = fields.trial_force(field, draws.force)
     return state, target, force
 
 

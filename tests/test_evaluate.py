@@ -16,7 +16,9 @@ import pytest
 
 from reach_jax import arm, batch, checkpoint, claims, cli, episodes, evaluate, network, panels, sensor, task, train
 from reach_jax import run_dir as run_dir_io
-from reach_jax.config import CONDITIONS, TEST_CONDITIONS, Config, TrainConfig, to_json
+from reach_jax.config import CONDITIONS, Config, TrainConfig, to_json
+
+TEST_CONDITIONS = Config().eval.test_conditions
 
 CFG = Config()
 N_STEPS = episodes.n_steps(CFG)

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from reach_jax import arm, episodes, evaluate, impedance, network
-from reach_jax.config import Config
+from reach_jax.config import Config, condition
 
 CFG = Config()
+VISCOUS = condition(CFG, "viscous").viscous
 K_TRUE = np.array([[300.0, 40.0], [-20.0, 150.0]])  # [N/m], not symmetric on purpose
 D_TRUE = np.array([[25.0, -6.0], [9.0, 12.0]])  # [N s/m]
 
@@ -97,10 +98,10 @@ def test_passive_damping_is_the_joint_viscosity_in_hand_space():
 
 
 def test_field_axes_of_the_paper_field():
-    values, axes = impedance.field_axes(CFG.force.viscous)
+    values, axes = impedance.field_axes(VISCOUS)
     np.testing.assert_allclose(values, [0.5 + np.sqrt(0.25 + 237.55), 0.5 - np.sqrt(0.25 + 237.55)], rtol=1e-12)
     assert values[0] == pytest.approx(15.92, abs=0.01) and values[1] == pytest.approx(-14.92, abs=0.01)
-    b = np.asarray(CFG.force.viscous)
+    b = np.asarray(VISCOUS)
     for v, e in zip(values, axes, strict=True):
         np.testing.assert_allclose(b @ e, v * e, atol=1e-12)
     angle = np.degrees(np.arctan2(axes[0, 1], axes[0, 0]))
@@ -134,9 +135,9 @@ def test_measure_recovers_the_controller_along_its_own_movements():
     free = valid & np.all(np.abs(applied) < 0.99 * np.asarray(CFG.arm.tau_max), axis=-1)
     assert free.sum() > 0.5 * valid.sum()
     np.testing.assert_allclose(gains["damping"][free], np.broadcast_to(d_true, (free.sum(), 2, 2)), atol=0.05)
-    summary = impedance.summarize(gains, [("none", 0)], ("none", "viscous"), CFG.force.viscous)
+    summary = impedance.summarize(gains, [("none", 0)], ("none", "viscous"), VISCOUS)
     row = summary["per_network"][0]
     assert row["states"] == int(valid[0, 0].sum())
     np.testing.assert_allclose(row["damping_Ns_per_m"]["median"], d_true, atol=0.05)
-    _, axes = impedance.field_axes(CFG.force.viscous)
+    _, axes = impedance.field_axes(VISCOUS)
     assert row["damping_unstable"]["median"] == pytest.approx(axes[0] @ d_true @ axes[0], abs=0.05)

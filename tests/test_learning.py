@@ -23,7 +23,7 @@ def _near_successes(group, starts, targets) -> np.ndarray:
             episodes.network_policy(CFG),
             group.states.params,
             group.conds.input_mask,
-            evaluate.test_fields(CFG)[:1],
+            jax.tree.map(lambda a: a[:1], evaluate.test_fields(CFG)),
             starts,
             targets,
             CFG,

@@ -16,8 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, encoding, learner, network, reference, rollout, sensor, task
-from reach_jax.config import Config, NetworkConfig, TaskConfig
+from reach_jax import arm, encoding, fields, learner, network, reference, rollout, sensor, task
+from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition
 
 CFG = Config()
 N_SAMPLES = 8  # random draws per comparison: enough to hit every branch, few enough to stay fast
@@ -55,11 +55,21 @@ def _float64_params(params):
 # Arm
 # ---------------------------------------------------------------------------------------------------------------
 
+VISCOUS = condition(CFG, "viscous").viscous
+# Every term of the hand-force field (fields.hand_force), alone and together, with a per-trial random force.
 FORCE_CASES = {
-    "none": (np.zeros((2, 2)), np.zeros(2)),
-    "viscous": (np.array(CFG.force.viscous), np.zeros(2)),
-    "constant": (np.zeros((2, 2)), np.array([5.0, -7.0])),
-    "both": (np.array(CFG.force.viscous), np.array([-8.0, 3.0])),
+    "none": (ConditionConfig(), np.zeros(2)),
+    "viscous": (ConditionConfig(viscous=VISCOUS), np.zeros(2)),
+    "curl": (ConditionConfig(viscous=((0.0, 13.0), (-13.0, 0.0))), np.zeros(2)),
+    "spring": (ConditionConfig(stiffness=((-60.0, 10.0), (10.0, -40.0)), anchor=(-0.05, 0.37)), np.zeros(2)),
+    "constant": (ConditionConfig(constant=(5.0, -7.0)), np.zeros(2)),
+    "random": (ConditionConfig(), np.array([-8.0, 3.0])),
+    "all": (
+        ConditionConfig(
+            viscous=VISCOUS, stiffness=((-30.0, 0.0), (0.0, -30.0)), anchor=(0.0, 0.4), constant=(2.0, 1.0)
+        ),
+        np.array([-8.0, 3.0]),
+    ),
 }
 
 
@@ -74,8 +84,8 @@ def test_dsdt_and_rk4_match_oracle(case):
     rng = _rng(1)
     states = _random_states(rng, N_SAMPLES)
     taus = rng.uniform(-1.0, 1.0, (N_SAMPLES, 2)) * np.array(CFG.arm.tau_max)
-    got_d = np.asarray(_DSDT(states, taus, field, force))
-    got_s = np.asarray(_RK4(states, taus, field, force))
+    got_d = np.asarray(_DSDT(states, taus, fields.make_field(field), force))
+    got_s = np.asarray(_RK4(states, taus, fields.make_field(field), force))
     want_d = np.array([reference.dsdt(s, t, field, force, CFG.arm) for s, t in zip(states, taus, strict=True)])
     want_s = np.array([reference.rk4(s, t, field, force, CFG.arm) for s, t in zip(states, taus, strict=True)])
     # Accelerations reach ~1e2 rad/s^2, so the absolute floor scales with them (RTOL argument above).
@@ -85,7 +95,7 @@ def test_dsdt_and_rk4_match_oracle(case):
     # The external force must matter when present (guards against a field silently ignored on both sides).
     if case != "none":
         plain = np.array(
-            [reference.dsdt(s, t, np.zeros((2, 2)), np.zeros(2), CFG.arm) for s, t in zip(states, taus, strict=True)]
+            [reference.dsdt(s, t, ConditionConfig(), np.zeros(2), CFG.arm) for s, t in zip(states, taus, strict=True)]
         )
         assert np.abs(plain - want_d).max() > 1e-3
 
@@ -102,6 +112,10 @@ def test_kinematics_match_oracle():
     np.testing.assert_allclose(
         np.asarray(jac(thetas)), np.array([reference.jacobian(th, CFG.arm) for th in thetas]), rtol=RTOL, atol=ATOL
     )
+    # J^-1 in closed form against a LAPACK inverse of the oracle's J; theta2 >= 0.05 rad keeps det J away from 0.
+    inv = jax.jit(jax.vmap(lambda th: arm.inverse_jacobian(th, CFG.arm)))
+    want_inv = np.array([np.linalg.inv(reference.jacobian(th, CFG.arm)) for th in thetas])
+    np.testing.assert_allclose(np.asarray(inv(thetas)), want_inv, rtol=1e-10, atol=1e-10 * np.abs(want_inv).max())
     # IK goes through arccos, whose derivative grows near a straight or folded arm; theta2 is kept >= 0.05 rad
     # from both, which bounds the amplification of eps to ~1/sin(0.05) = 20, still far below 1e-10.
     got_ik = np.asarray(ik(hands))
@@ -133,8 +147,9 @@ def test_elbow_stop_and_limits_match_oracle():
     # A full step that drives the elbow into the stop: RK4 then clamp, on both sides.
     tau = np.array([0.0, CFG.arm.tau_max[1]])
     start = np.array([0.6, stop - 0.02, 0.0, 3.0])
-    step_j = jax.jit(lambda s: arm.step(s, jnp.asarray(tau), jnp.zeros((2, 2)), jnp.zeros(2), CFG.arm))
-    want_step = reference.arm_step(start, tau, np.zeros((2, 2)), np.zeros(2), CFG.arm)
+    null = ConditionConfig()
+    step_j = jax.jit(lambda s: arm.step(s, jnp.asarray(tau), fields.make_field(null), jnp.zeros(2), CFG.arm))
+    want_step = reference.arm_step(start, tau, null, np.zeros(2), CFG.arm)
     assert want_step[1] == stop  # the case really hits the stop
     np.testing.assert_allclose(np.asarray(step_j(start)), want_step, rtol=RTOL, atol=ATOL)
 
@@ -424,14 +439,15 @@ def test_n_max_and_curriculum_match_oracle():
 
 def test_trial_placement_and_drift_match_oracle():
     rng = _rng(11)
-    place = jax.jit(lambda d, dist, amp: task.place_trial(d, dist, amp, CFG))
+    place = jax.jit(lambda d, dist, field: task.place_trial(d, dist, field, CFG))
+    random, null = ConditionConfig(random=(8.0, 3.0)), ConditionConfig()
     drift = jax.jit(lambda tg, h, t: task.drift_target(tg, h, t, CFG))
     lo, hi = reference.curriculum_bounds(CFG)
     for dist in (lo, 0.5 * (lo + hi), hi):
         draws = reference.Draws(rng.random(2), rng.random((CFG.task.target_candidates, 2)), rng.random(2))
         jd = task.TrialDraws(*(jnp.asarray(a) for a in draws))
-        s, tg, f = place(jd, jnp.asarray(dist), jnp.asarray(CFG.force.random_amplitude))
-        rs, rtg, rf = reference.place_trial(draws, dist, CFG.force.random_amplitude, CFG)
+        s, tg, f = place(jd, jnp.asarray(dist), fields.make_field(random))
+        rs, rtg, rf = reference.place_trial(draws, dist, random, CFG)
         # Affine maps of the draws and an IK (1e-10 bound as in test_kinematics_match_oracle).
         np.testing.assert_allclose(np.asarray(s), rs, atol=1e-10)
         np.testing.assert_allclose(np.asarray(tg), rtg, rtol=RTOL, atol=ATOL)
@@ -439,8 +455,8 @@ def test_trial_placement_and_drift_match_oracle():
     # All candidates touch the start: the last one is taken.
     draws = reference.Draws(np.full(2, 0.5), np.full((CFG.task.target_candidates, 2), 0.5), np.zeros(2))
     draws = draws._replace(target=draws.target + 0.01 * np.arange(CFG.task.target_candidates)[:, None])
-    _, tg, _ = place(task.TrialDraws(*(jnp.asarray(a) for a in draws)), jnp.asarray(lo), jnp.asarray(0.0))
-    _, rtg, _ = reference.place_trial(draws, lo, 0.0, CFG)
+    _, tg, _ = place(task.TrialDraws(*(jnp.asarray(a) for a in draws)), jnp.asarray(lo), fields.make_field(null))
+    _, rtg, _ = reference.place_trial(draws, lo, null, CFG)
     np.testing.assert_allclose(np.asarray(tg), rtg, rtol=RTOL, atol=ATOL)
 
     hand, target = np.array([-0.05, 0.37]), np.array([0.0, 0.40])
@@ -465,15 +481,11 @@ ROLLOUT_SEEDS = (2, 3)
 
 def test_rollout_replays_in_oracle():
     cfg = ROLLOUT_CFG
-    # The viscous field and a random constant force at once, with every input kept: all force paths run.
-    cond = task.Condition(
-        field=jnp.asarray(cfg.force.viscous),
-        force_amplitude=jnp.asarray(cfg.force.random_amplitude),
-        input_mask=encoding.input_mask(True, cfg),
-    )
-    ref_cond = reference.Condition(
-        np.array(cfg.force.viscous), cfg.force.random_amplitude, reference.input_mask(True, cfg)
-    )
+    # The viscous field and a random per-trial force at once, with every input kept (the spring and constant
+    # terms are checked step by step in test_dsdt_and_rk4_match_oracle; with them no trial here reaches the goal).
+    spec = ConditionConfig(viscous=VISCOUS, random=(8.0, 8.0))
+    cond = task.Condition(field=fields.make_field(spec), input_mask=encoding.input_mask(True, cfg))
+    ref_cond = reference.Condition(spec, reference.input_mask(True, cfg))
     hyper = rollout.default_hyper(cfg)
     trace = rollout.make_trace(cfg, ROLLOUT_STEPS)  # compiled once, run for each seed
     seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0}

@@ -13,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm
-from reach_jax.config import ArmConfig, ForceConfig
+from reach_jax import arm, fields
+from reach_jax.config import PAPER_CONDITIONS, ArmConfig, ConditionConfig
 
 N_SAMPLES = 6
 
@@ -36,7 +36,7 @@ def _states(seed: int, n: int = N_SAMPLES):
 def _energy_run(cfg: ArmConfig, duration: float):
     """Jitted (n, 4) -> (kinetic energies (n, steps + 1), max |omega| (n,)) of free RK4 motion."""
     n_steps = round(duration / cfg.dt)
-    zero_tau, zero_field, zero_force = jnp.zeros(2), jnp.zeros((2, 2)), jnp.zeros(2)
+    zero_tau, zero_field, zero_force = jnp.zeros(2), fields.make_field(ConditionConfig()), jnp.zeros(2)
 
     def one(s):
         def body(carry, _):
@@ -96,7 +96,8 @@ def _virtual_work_torque(theta, force, cfg: ArmConfig, h: float = 1e-5):
 def test_hand_force_enters_as_jacobian_transpose():
     cfg = ArmConfig()
     rng = np.random.default_rng(2)
-    deriv = jax.jit(lambda s, f: arm.dsdt(s, jnp.zeros(2), jnp.zeros((2, 2)), f, cfg))
+    null = fields.make_field(ConditionConfig())
+    deriv = jax.jit(lambda s, f: arm.dsdt(s, jnp.zeros(2), null, f, cfg))
     jt_f = jax.jit(lambda th, f: arm.jacobian(th, cfg).T @ f)
     mass = jax.jit(lambda th: arm.mass_matrix(th, cfg))
     for state in _states(3):
@@ -113,8 +114,12 @@ def test_hand_force_enters_as_jacobian_transpose():
 def test_viscous_field_power():
     """Power into the joints from J^T (B xdot) equals the power xdot . B xdot of the field at the hand."""
     cfg = ArmConfig()
-    field = jnp.asarray(ForceConfig().viscous)
-    deriv = jax.jit(lambda s, b: arm.dsdt(s, jnp.zeros(2), b, jnp.zeros(2), cfg))
+    field = jnp.asarray(PAPER_CONDITIONS[1].viscous)
+    deriv = jax.jit(
+        lambda s, b: arm.dsdt(
+            s, jnp.zeros(2), fields.make_field(ConditionConfig()).replace(viscous=b), jnp.zeros(2), cfg
+        )
+    )
     mass = jax.jit(lambda th: arm.mass_matrix(th, cfg))
     fk = jax.jit(lambda th: arm.hand_position(th, cfg))
     h = 1e-6  # [s] time step for the hand velocity by central differences along theta + omega t

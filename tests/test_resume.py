@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from reach_jax import checkpoint, cli, rollout, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.cli import error_line
-from reach_jax.config import Config, TrainConfig, from_dict, to_dict
+from reach_jax.config import ConditionConfig, Config, TrainConfig, from_dict, to_dict
 from reach_jax.errors import printable
 
 ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
@@ -326,7 +326,7 @@ JSONISH = st.recursive(
     ),
     max_leaves=12,
 )
-SECTIONS = {f.name: f.default_factory() for f in dataclasses.fields(Config)}
+SECTIONS = {f.name: f.default_factory() for f in dataclasses.fields(Config) if f.name != "conditions"}
 
 
 @settings(max_examples=300, deadline=None)
@@ -347,6 +347,24 @@ def test_fuzzed_config_files_parse_or_fail_with_one_line(section, field, value):
     else:
         assert isinstance(cfg, Config)
         assert isinstance(cfg.train, TrainConfig)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    name=st.one_of(st.sampled_from(["none", "viscous", "curl"]), st.text(max_size=6)),
+    field=st.one_of(st.text(max_size=8), st.sampled_from([f.name for f in dataclasses.fields(ConditionConfig)])),
+    value=JSONISH,
+)
+def test_fuzzed_conditions_parse_or_fail_with_one_line(name, field, value):
+    data = json.loads(json.dumps(to_dict(Config())))
+    data["conditions"].setdefault(name, {})[field] = value
+    try:
+        cfg = from_dict(data)
+    except ValueError as exc:
+        assert str(exc) and "\n" not in str(exc)
+        assert printable(field) in str(exc) or printable(name) in str(exc)
+    else:
+        assert name in [c.name for c in cfg.conditions]
 
 
 @settings(max_examples=300, deadline=None)

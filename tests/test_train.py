@@ -11,10 +11,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, batch, cli, encoding, learner, network, rollout, sensor, task, train
+from reach_jax import arm, batch, cli, encoding, fields, learner, network, rollout, sensor, task, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import (
     CONDITIONS,
+    ConditionConfig,
     Config,
     LearnerConfig,
     TaskConfig,
@@ -99,7 +100,8 @@ def test_new_trials_start_in_field_at_rest_with_untouched_target_in_the_box():
     keys = jax.random.split(jax.random.PRNGKey(3), 256)
     distance = jnp.array(0.08)
     draws = jax.vmap(lambda k: task.draw_trial(k, CFG))(keys)
-    start, target, force = jax.vmap(lambda d: task.place_trial(d, distance, jnp.array(8.0), CFG))(draws)
+    field = fields.make_field(ConditionConfig(random=(8.0, 8.0)))
+    start, target, force = jax.vmap(lambda d: task.place_trial(d, distance, field, CFG))(draws)
     hand = jax.vmap(lambda s: arm.hand_position(s[:2], CFG.arm))(start)
     assert np.all(np.asarray(start[:, 2:]) == 0)
     assert np.all((hand >= lo - 1e-6) & (hand <= hi + 1e-6))
@@ -112,9 +114,9 @@ def test_new_trials_start_in_field_at_rest_with_untouched_target_in_the_box():
 def test_conditions_are_data():
     conds = task.stack_conditions(CONDITIONS, CFG)
     chex.assert_tree_shape_prefix(conds, (4,))
-    field_norms = np.abs(np.asarray(conds.field)).sum(axis=(1, 2))
+    field_norms = np.abs(np.asarray(conds.field.viscous)).sum(axis=(1, 2))
     assert list(field_norms > 0) == [False, True, False, False]
-    assert list(np.asarray(conds.force_amplitude) > 0) == [False, False, True, True]
+    assert list(np.asarray(conds.field.random).min(axis=1) > 0) == [False, False, True, True]
     past = np.asarray(conds.input_mask)[:, n_inputs(CFG) - n_past_inputs(CFG) :]
     assert list(past.sum(axis=1)) == [60, 60, 60, 0]
     with pytest.raises(ValueError, match="unknown condition"):

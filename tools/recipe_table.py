@@ -31,7 +31,7 @@ def rows(run: Path) -> list[str]:
     out = []
     for recipe in data["recipes"]:
         verdicts = {c["claim"]: SHORT[c["verdict"]] for c in recipe["claims"]}
-        near = sum(all(c["near_paper"].values()) for c in recipe["cells"])
+        near = sum(bool(c["near_paper"]) and all(c["near_paper"].values()) for c in recipe["cells"])
         judged = [p for p in recipe["curriculum"]["learners"] if p["tail_chunks"]]
         stable = f"{sum(p['stable'] for p in judged)}/{len(judged)}" if judged else "not yet judged"
         damping = {c["learning"]: c["damping_unstable"]["mean"] for c in recipe["impedance"] if c["test"] == "none"}

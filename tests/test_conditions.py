@@ -1,0 +1,89 @@
+"""Conditions are data: a user-defined field in JSON trains, evaluates and draws with no Python change."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from reach_jax import cli, evaluate, task
+from reach_jax import run_dir as run_dir_io
+from reach_jax.config import PAPER_CONDITIONS, Config, condition, from_dict, to_dict
+
+CURL = [[0.0, 13.0], [-13.0, 0.0]]  # [N s/m], a curl field: the force turns the hand velocity by 90 degrees
+
+
+def test_a_user_condition_is_added_to_the_paper_four_and_round_trips():
+    data = {"version": 1, "conditions": {"curl": {"viscous": CURL}, "viscous": {"constant": [1, 2]}}}
+    cfg = from_dict(data)
+    assert [c.name for c in cfg.conditions] == ["none", "viscous", "random", "random_nopast", "curl"]
+    assert condition(cfg, "curl").viscous == ((0.0, 13.0), (-13.0, 0.0))
+    # A field given for a paper condition changes that field only.
+    assert condition(cfg, "viscous").viscous == PAPER_CONDITIONS[1].viscous
+    assert condition(cfg, "viscous").constant == (1.0, 2.0) and isinstance(condition(cfg, "viscous").constant[0], float)
+    assert from_dict(json.loads(json.dumps(to_dict(cfg)))) == cfg
+    field = task.make_condition("curl", cfg).field
+    np.testing.assert_array_equal(np.asarray(field.viscous), CURL)
+    np.testing.assert_array_equal(np.asarray(field.random), 0.0)
+
+
+def test_a_stored_force_section_becomes_the_paper_conditions_fields():
+    # Configs written before conditions were data held the viscous matrix and the random bound in `force`.
+    old = {"version": 1, "force": {"viscous": [[-10.1, -11.2], [-11.2, 11.1]], "random_amplitude": 8.0}}
+    assert from_dict(old) == Config()
+    changed = from_dict({"version": 1, "force": {"random_amplitude": 5.0}})
+    assert condition(changed, "random").random == (5.0, 5.0) == condition(changed, "random_nopast").random
+
+
+@pytest.mark.parametrize(
+    "setting, message",
+    [
+        (["--conditions", "none,curl"], "train.conditions: must be distinct names from"),
+        (["--set", "conditions.curl.viscous=[[0, 1]]"], "conditions.curl.viscous"),
+        (["--set", "conditions.curl.constant=[NaN, 0]"], "conditions.curl.constant"),
+        (["--set", "conditions.curl.spring=1"], "conditions.curl.spring: unknown field"),
+        (["--set", 'eval.test_conditions=["none", "twist"]'], "eval.test_conditions"),
+        (["--set", "conditions.a,b.constant=[1, 1]"], "without commas or spaces"),
+    ],
+)
+def test_bad_conditions_are_one_line_errors_with_nothing_written(setting, message, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert cli.train_main(["--trials", "5", *setting, "--out", str(out), "--quiet"]) == cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+
+
+def test_a_fifth_condition_trains_and_evaluates_from_a_config_file(tmp_path):
+    spec = {
+        "conditions": {"curl": {"viscous": CURL}},
+        "train": {"trials": 20, "seeds": 1, "conditions": ["none", "curl"], "chunk_steps": 300},
+        "eval": {"test_conditions": ["none", "viscous", "curl"]},
+    }
+    (tmp_path / "curl.json").write_text(json.dumps(spec))
+    run = tmp_path / "run"
+    # Each command in its own process, as a user runs them.
+    train = ["train", "--config", str(tmp_path / "curl.json"), "--out", str(run), "--quiet"]
+    for argv in (train, ["evaluate", str(run)]):
+        done = subprocess.run(
+            [sys.executable, "-m", f"reach_jax.{argv[0]}", *argv[1:]], capture_output=True, text=True, timeout=600
+        )
+        assert done.returncode == 0, done.stderr[-3000:]
+    loaded = run_dir_io.load(run)
+    assert loaded.learners == [("none", 0), ("curl", 0)]
+    np.testing.assert_array_equal(np.asarray(loaded.batch.conds.field.viscous[1]), CURL)
+    out = run / evaluate.EVAL_DIR
+    t2 = json.loads((out / "table2.json").read_text())
+    assert [(r["learning"], r["test"]) for r in t2["rows"]] == [
+        (c, t) for c in ("none", "curl") for t in ("none", "viscous", "curl")
+    ]
+    claims = json.loads((out / "claims.json").read_text())
+    cells = claims["recipes"][0]["cells"]
+    assert ("curl", "curl") in {(c["learning"], c["test"]) for c in cells}
+    assert all(c["paper"] is None for c in cells if "curl" in (c["learning"], c["test"]))
+    assert "| curl → curl |" in (out / "table2.md").read_text()
+    for name in ("fig4.png", "fig5.png", "learning_curves.png", "impedance.png"):
+        assert (out / name).stat().st_size > 10_000
