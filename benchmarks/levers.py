@@ -4,7 +4,8 @@
 
 Units: learner-steps per second (median of the timed calls of `throughput.time_chunk`). Levers switched off:
 - `dense_layer1`: the layer-1 product and SGD step over all 125 input rows instead of the 45 that can be
-  non-zero (`Speed.sparse_layer1` off, the dense path of `learner.ts_step`);
+  non-zero (`Speed.sparse_layer1` off, the dense path of `learner.ts_step`; the support is still computed, as
+  the pending step carries it: not the variant in results/levers.json, which patched the support out);
 - `draws_per_step`: random draws made one step at a time inside the step body (`Speed.draw_block` = 1)
   instead of 64 steps at a time;
 - `one_device`: the learner axis on one device instead of sharded over all of them;

@@ -419,7 +419,7 @@ def evaluate_main(argv=None) -> int:
     parser = build_evaluate_parser()
     try:
         args = parser.parse_args(argv)
-        distribute.setup_backend(1)  # the evaluation runs on one device; more would only split its thread pool
+        distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
         run = run_dir_io.load(args.run_dir, args.checkpoint)
     except (UsageError, CheckpointError) as exc:
         sys.stderr.write(error_line(parser.prog, str(exc)))

@@ -113,6 +113,12 @@ def recipe_index(hypers) -> tuple[list[dict], list[int]]:
     return [dict(zip(batch.HYPER_GRIDS, v, strict=True)) for v in distinct], [distinct.index(v) for v in values]
 
 
+def learning_conditions(learners: list[tuple[str, int]], cfg: Config) -> list[str]:
+    """The learning conditions that have networks, in the order of the config's conditions table."""
+    names = {name for name, _ in learners}
+    return [c.name for c in cfg.conditions if c.name in names]
+
+
 def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int]], recipe_of, cfg: Config) -> dict:
     """Table 2 as a JSON-ready dict: counts summed over each learning condition's networks, and per network.
 
@@ -128,7 +134,7 @@ def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int
       "per_network": one row per network and test, "pairs_per_network"}.
     """
     rows, first_two, per_network = [], [], []
-    present = [c.name for c in cfg.conditions if any(c.name == name for name, _ in learners)]
+    present = learning_conditions(learners, cfg)
     for learning in present:
         nets = [i for i, (name, _) in enumerate(learners) if name == learning]
         for j, test in enumerate(cfg.eval.test_conditions):
@@ -455,7 +461,7 @@ def quality(ep: Episode, learners, starts: np.ndarray, targets: np.ndarray, cfg:
       cfg: model config.
     """
     cells = []
-    for learning in [c.name for c in cfg.conditions if any(c.name == name for name, _ in learners)]:
+    for learning in learning_conditions(learners, cfg):
         nets = [i for i, (name, _) in enumerate(learners) if name == learning]
         for j, test in enumerate(cfg.eval.test_conditions):
             sub = Episode(*(np.concatenate([np.asarray(a)[i, j] for i in nets]) for a in ep))

@@ -204,7 +204,7 @@ def learner_step(
       hyper: its learning constants.
       cfg: model config.
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
-      speed: how the step is computed (the layer-1 support); the result does not depend on it.
+      speed: how the step is computed; only `sparse_layer1` changes the result, and only by float32 rounding.
     """
     bound = exploration_bound(hyper, state.trials, state.full_at)
     rnd, draws = split_uniforms(u, bound, cfg)

@@ -155,7 +155,7 @@ def run(
         that already holds one (FileExistsError).
       resume: continue the run in run_dir from its newest checkpoint; cfg must equal its config.json.
       progress: draw a progress bar on `stream` (default stderr).
-      speed: how the compiled chunk runs; results do not depend on it.
+      speed: how the compiled chunk runs (`rollout.Speed`); the defaults are what every committed run used.
       devices: devices to spread the learners over (default every device of every process).
     """
     run_dir = default_run_dir(cfg.train) if run_dir is None else Path(run_dir)

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from reach_jax import cli, evaluate, task
+from reach_jax import claims, cli, evaluate, task
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import PAPER_CONDITIONS, Config, condition, from_dict, to_dict
 
@@ -87,3 +87,11 @@ def test_a_fifth_condition_trains_and_evaluates_from_a_config_file(tmp_path):
     assert "| curl → curl |" in (out / "table2.md").read_text()
     for name in ("fig4.png", "fig5.png", "learning_curves.png", "impedance.png"):
         assert (out / name).stat().st_size > 10_000
+
+
+def test_no_claim_is_judged_without_both_of_the_papers_test_conditions():
+    row = {"seed": 0, "success": 1000, "out": 0, "fail": 40, "mean_time_s": 1.0}
+    rows = [{**row, "learning": learning, "test": "none"} for learning in ("none", "viscous", "random")]
+    assert claims.recipe_claims(claims.Cells(rows, 1040), {}, Config()) == []
+    both = rows + [{**r, "test": "viscous"} for r in rows]
+    assert len(claims.recipe_claims(claims.Cells(both, 1040), {}, Config())) == 4
