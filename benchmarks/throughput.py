@@ -87,10 +87,10 @@ def time_chunk(
     probe = 200
     chunk = rollout.make_chunk(cfg, probe, devices, speed)
     t0 = time.perf_counter()
-    states = jax.block_until_ready(chunk(learners.states, learners.conds, learners.hypers, budget))
+    states = jax.block_until_ready(chunk(learners.states, learners.plans, learners.hypers, budget)[0])
     first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    states = jax.block_until_ready(chunk(states, learners.conds, learners.hypers, budget))
+    states = jax.block_until_ready(chunk(states, learners.plans, learners.hypers, budget)[0])
     per_step = (time.perf_counter() - t0) / probe
     compile_s = first - per_step * probe
 
@@ -98,11 +98,11 @@ def time_chunk(
         n_steps = probe if quick else max(probe, int(TARGET_SECONDS / per_step))
     if n_steps != probe:
         chunk = rollout.make_chunk(cfg, n_steps, devices, speed)
-        states = jax.block_until_ready(chunk(states, learners.conds, learners.hypers, budget))  # compile, warm
+        states = jax.block_until_ready(chunk(states, learners.plans, learners.hypers, budget)[0])  # compile, warm
     times = []
     for _ in range(QUICK_REPS if quick else REPS):
         t0 = time.perf_counter()
-        states = jax.block_until_ready(chunk(states, learners.conds, learners.hypers, budget))
+        states = jax.block_until_ready(chunk(states, learners.plans, learners.hypers, budget)[0])
         times.append(time.perf_counter() - t0)
     used = len(states.arm.sharding.device_set)
     return {

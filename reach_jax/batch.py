@@ -13,16 +13,17 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from reach_jax import rollout, task
-from reach_jax.config import Config, TrainConfig
+from reach_jax import protocol, rollout, task
+from reach_jax.config import Config, TrainConfig, blocks_of
 
 
 class Batch(NamedTuple):
     """Everything a chunk needs, learner axis first."""
 
     states: rollout.LearnerState
-    conds: task.Condition
+    conds: task.Condition  # the condition each learner ends in: its own, or its protocol's last block's
     hypers: rollout.Hyper
+    plans: protocol.Plan  # what each learner runs, trial by trial
 
 
 # rollout.Hyper field -> the TrainConfig grid that sweeps it (its default is the LearnerConfig field of that name).
@@ -44,7 +45,12 @@ def hyper_grid(cfg: Config) -> list[dict[str, float]]:
 
 def learner_hypers(cfg: Config) -> list[dict[str, float]]:
     """Hyperparameters of every learner, aligned with learner_table."""
-    return [h for _ in cfg.train.conditions for h in hyper_grid(cfg) for _ in range(cfg.train.seeds)]
+    return [h for _ in learner_names(cfg.train) for h in hyper_grid(cfg) for _ in range(cfg.train.seeds)]
+
+
+def learner_names(train: TrainConfig) -> tuple[str, ...]:
+    """The conditions, then the protocols, that learners run."""
+    return train.conditions + train.protocols
 
 
 def hyper_columns(cfg: Config) -> rollout.Hyper:
@@ -54,9 +60,9 @@ def hyper_columns(cfg: Config) -> rollout.Hyper:
 
 
 def learner_table(train: TrainConfig) -> list[tuple[str, int]]:
-    """(condition, seed index) of every learner, in batch order: condition, then sweep point, then seed."""
+    """(condition or protocol, seed index) of every learner, in batch order: name, then sweep point, then seed."""
     n_grid = math.prod(max(len(getattr(train, grid)), 1) for grid in HYPER_GRIDS.values())
-    return [(c, s) for c in train.conditions for _ in range(n_grid) for s in range(train.seeds)]
+    return [(c, s) for c in learner_names(train) for _ in range(n_grid) for s in range(train.seeds)]
 
 
 def learner_key(seed: int, index: int) -> jax.Array:
@@ -65,15 +71,56 @@ def learner_key(seed: int, index: int) -> jax.Array:
 
 
 def conditions(cfg: Config) -> task.Condition:
-    """Every learner's condition, stacked in batch order."""
-    return task.stack_conditions([c for c, _ in learner_table(cfg.train)], cfg)
+    """Every learner's final condition (its protocol's last block's), stacked in batch order."""
+    return task.stack_conditions([blocks_of(cfg, c)[-1].condition for c, _ in learner_table(cfg.train)], cfg)
+
+
+def plans(cfg: Config) -> protocol.Plan:
+    """Every learner's plan, stacked in batch order."""
+    return protocol.stack_plans([c for c, _ in learner_table(cfg.train)], cfg)
 
 
 def init_batch(cfg: Config) -> Batch:
-    """Fresh learners for cfg.train's conditions x seeds."""
+    """Fresh learners for cfg.train's conditions and protocols x seeds."""
     table = learner_table(cfg.train)
-    conds = conditions(cfg)
+    plan = plans(cfg)
     keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
-    states = jax.vmap(lambda k, c: rollout.init_learner(k, c, cfg))(keys, conds)
+    states = jax.vmap(lambda k, p: rollout.init_learner(k, p, cfg))(keys, plan)
     # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
-    return Batch(*jax.tree.map(jnp.copy, (states, conds, hyper_columns(cfg))))
+    return Batch(*jax.tree.map(jnp.copy, (states, conditions(cfg), hyper_columns(cfg), plan)))
+
+
+def source_indices(source_table: list[tuple[str, int]], cfg: Config) -> list[int]:
+    """Index in the source run (train.init_from) of each learner's starting network; ValueError if one is missing."""
+    picks = []
+    for name, seed in learner_table(cfg.train):
+        wanted = (blocks_of(cfg, name)[0].condition, seed)
+        if wanted not in source_table:
+            raise ValueError(
+                f"train.init_from: {cfg.train.init_from} has no network of condition {wanted[0]} and seed {seed}"
+            )
+        picks.append(source_table.index(wanted))
+    return picks
+
+
+def start_from(states: rollout.LearnerState, source, source_table: list[tuple[str, int]], cfg: Config):
+    """Fresh learner states that take the trained networks of another run (train.init_from, model §12).
+
+    Learner (name, seed) takes the network of the source's learner with the same seed index in the condition of
+    its first block (the first such learner of a sweep): its weights, N_max and curriculum distance. Its trials,
+    steps, key and first trial stay its own.
+
+    Args:
+      states: fresh states, learner axis first (`init_batch`).
+      source: the source run's LearnerState at its last checkpoint, learner axis first.
+      source_table: the source's (condition, seed index) per learner.
+      cfg: this run's config.
+    """
+    picks = source_indices(source_table, cfg)
+    taken = jax.tree.map(lambda a: jnp.asarray(a)[jnp.asarray(picks)], source)
+    return states.replace(
+        params=jax.tree.map(jnp.copy, taken.params),
+        n_max=taken.n_max,
+        distance=taken.distance,
+        full_at=jnp.where(taken.full_at >= 0, 0, -1).astype(jnp.int32),
+    )

@@ -59,7 +59,8 @@ def append_lines(path: Path, lines: list[str]) -> None:
         os.fsync(f.fileno())
 
 
-def _flatten(tree) -> dict[str, np.ndarray]:
+def flatten(tree) -> dict[str, np.ndarray]:
+    """Leaves of a pytree as NumPy arrays keyed by their path, as a checkpoint stores them."""
     leaves, _ = jax.tree_util.tree_flatten_with_path(tree)
     return {jax.tree_util.keystr(path): np.asarray(leaf) for path, leaf in leaves}
 
@@ -77,7 +78,7 @@ def save(run_dir: Path, chunk: int, tree, meta: dict, keep_every: int = 0) -> Pa
     """
     folder = Path(run_dir) / CHECKPOINT_DIR
     folder.mkdir(parents=True, exist_ok=True)
-    arrays = _flatten(tree)
+    arrays = flatten(tree)
     arrays["__meta__"] = np.frombuffer(
         json.dumps({"format_version": FORMAT_VERSION, "chunk": chunk, **meta}).encode(), dtype=np.uint8
     )
@@ -104,11 +105,11 @@ def list_checkpoints(run_dir: Path) -> list[Path]:
     return sorted(folder.glob("chunk_*.npz"))
 
 
-def load(path: Path, template, defaults=None) -> tuple[object, dict]:
+def load(path: Path, template, defaults: dict[str, np.ndarray] | None = None) -> tuple[object, dict]:
     """Read a checkpoint into the structure of `template`; raises CheckpointError naming what is wrong.
 
-    `defaults`, a pytree like `template` with values, fills leaves that the file lacks (fields added to the
-    state since it was written); without it a missing leaf is an error.
+    `defaults`, leaves keyed like `flatten(template)`, fills those that the file lacks (fields added to the
+    state since it was written); any other missing leaf is an error.
     """
     path = Path(path)
     try:
@@ -127,7 +128,7 @@ def load(path: Path, template, defaults=None) -> tuple[object, dict]:
             f"{path}: field format_version is {meta.get('format_version')}, expected {FORMAT_VERSION}"
         )
     leaves, treedef = jax.tree_util.tree_flatten_with_path(template)
-    fallback = {} if defaults is None else _flatten(defaults)
+    fallback = defaults or {}
     restored = []
     for key_path, leaf in leaves:
         name = jax.tree_util.keystr(key_path)

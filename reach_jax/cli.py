@@ -29,6 +29,7 @@ from reach_jax.config import (
     Config,
     first_difference,
     from_dict,
+    protocol_trials,
     to_dict,
     to_json,
     tuplify,
@@ -50,6 +51,7 @@ CLUSTER_ENV = {
 # Training flag -> the TrainConfig field it sets; a hyperparameter's flag sets its sweep grid.
 TRAIN_FLAGS = {
     **{name: name for name in ("trials", "seeds", "conditions", "seed", "chunk_steps", "keep_every")},
+    **{name: name for name in ("protocols", "init_from", "trial_log_every")},
     **batch.HYPER_GRIDS,
 }
 
@@ -137,6 +139,26 @@ def build_train_parser() -> argparse.ArgumentParser:
         type=_conditions,
         help=f"comma-separated names from the conditions table (the paper's: {','.join(CONDITIONS)}; add one with "
         "--config FILE or --set conditions.NAME.FIELD=JSON)",
+    )
+    p.add_argument(
+        "--protocol",
+        dest="protocols",
+        type=_conditions,
+        help="comma-separated protocols from the protocols table (shipped: adaptation; add one with --config FILE "
+        "or --set protocols.NAME=JSON); without --conditions only these learners run, and --trials defaults to "
+        "the protocol's length",
+    )
+    p.add_argument(
+        "--init-from",
+        type=str,
+        metavar="RUN_DIR",
+        help="start each learner from the trained network of this run with its seed and first block's condition",
+    )
+    p.add_argument(
+        "--trial-log-every",
+        type=_non_negative_int,
+        metavar="N",
+        help="log every N-th trial's movement (errors, outcome, time) to RUN_DIR/trials (default 0: no log)",
     )
     p.add_argument("--seed", type=_non_negative_int, help="master PRNG seed (default 0)")
     p.add_argument("--chunk-steps", type=_positive_int, help="learner steps per compiled chunk")
@@ -275,6 +297,16 @@ def _with_settings(data: dict, args) -> dict:
     for flag, field in TRAIN_FLAGS.items():
         if getattr(args, flag) is not None:
             data.setdefault("train", {})[field] = getattr(args, flag)
+    if args.protocols is not None:
+        # A protocol run trains only the protocol's learners, for as long as the protocol lasts, unless told otherwise.
+        if args.conditions is None:
+            data["train"]["conditions"] = ()
+        if args.trials is None and ("train", "trials") not in {(section, field) for section, field, _ in args.set}:
+            try:
+                lengths = {n: protocol_trials(data.get("protocols", {}), n) for n in args.protocols}
+            except ValueError as exc:
+                raise UsageError(str(exc)) from None
+            data["train"]["trials"] = max(lengths.values())
     return data
 
 
@@ -328,6 +360,11 @@ def validate(args: argparse.Namespace) -> Invocation:
         run_dir_io.load_batch(args.resume, cfg)
         return Invocation(cfg, args.resume, True, args.quiet, speed)
     cfg = build_config(args)
+    if cfg.train.init_from:
+        try:
+            batch.source_indices(run_dir_io.load_networks(cfg)[1], cfg)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     run_dir = args.out if args.out is not None else train.default_run_dir(cfg.train)
     existing = _first_existing(run_dir)
     if not existing.is_dir():

@@ -145,6 +145,7 @@ class EvalConfig:
     impedance_max_steps: int = 50  # and at its first 50 acting states (1 s), where movements happen (choice)
     impedance_min_sin_elbow: float = 0.2  # states with sin(theta2) below this (J near singular) are skipped (choice)
     test_conditions: tuple[str, ...] = ("none", "viscous")  # Table 2 columns: the conditions every network is tested in
+    adaptation_window: int = 1000  # adaptation curves average this many logged trials per point (choice)
 
 
 @dataclass(frozen=True)
@@ -170,6 +171,41 @@ CONDITIONS = tuple(c.name for c in PAPER_CONDITIONS)  # Table 2 rows
 
 
 @dataclass(frozen=True)
+class BlockConfig:
+    """One block of a protocol (model §12): trials in a condition, learning on or off, with catch trials."""
+
+    trials: int = 1  # trials the block lasts
+    condition: str = "none"  # name in Config.conditions
+    learning: bool = True  # False freezes the weights (the curriculum and N_max still follow the trials)
+    catch: float = 0.0  # probability that a trial of the block runs in catch_condition instead
+    catch_condition: str = "none"  # name in Config.conditions
+
+
+@dataclass(frozen=True)
+class ProtocolConfig:
+    """A named list of blocks; a learner running it switches blocks at trial boundaries."""
+
+    name: str = ""  # how train.protocols and --protocol refer to it
+    blocks: tuple[BlockConfig, ...] = ()
+
+
+# Null -> viscous field with catch trials (in the null field) -> null again (washout): the design of Shadmehr &
+# Mussa-Ivaldi 1994, for networks first trained without the field (train.init_from). The control runs the same
+# blocks without the field, so that the analysis can tell the field's effects from the drift of online learning.
+# Block lengths chosen on development networks (README "Adaptation").
+PROTOCOLS = (
+    ProtocolConfig(
+        "adaptation",
+        (BlockConfig(5_000, "none"), BlockConfig(20_000, "viscous", catch=0.1), BlockConfig(20_000, "none")),
+    ),
+    ProtocolConfig(
+        "adaptation_control",
+        (BlockConfig(5_000, "none"), BlockConfig(20_000, "none", catch=0.1), BlockConfig(20_000, "none")),
+    ),
+)
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     """One training run: which learners, how long, how it is chunked."""
 
@@ -185,6 +221,10 @@ class TrainConfig:
     noise_anneal_delay_grid: tuple[float, ...] = ()  # sweep: anneal delays [trials]; () = learner.noise_anneal_delay
     noise_anneal_trials_grid: tuple[float, ...] = ()  # sweep: anneal lengths [trials]; () = learner.noise_anneal_trials
     keep_every: int = 0  # also keep the checkpoint of every keep_every-th chunk (snapshots); 0 = newest two only
+    protocols: tuple[str, ...] = ()  # learners that run protocols (names in Config.protocols), after the conditions
+    init_from: str = ""  # a run directory whose final networks start the learners (model §12); "" = fresh weights
+    trial_log_every: int = 0  # log every n-th trial's movement to trials/ (model §12); 0 = no per-trial log
+    direction_time: float = 0.1  # the logged initial direction is the hand's at this time into the trial [s] (choice)
 
 
 @dataclass(frozen=True)
@@ -201,12 +241,14 @@ class Config:
     claims: ClaimsConfig = field(default_factory=ClaimsConfig)
     train: TrainConfig = field(default_factory=TrainConfig)
     conditions: tuple[ConditionConfig, ...] = PAPER_CONDITIONS  # the named conditions; JSON: {name: fields}
+    protocols: tuple[ProtocolConfig, ...] = PROTOCOLS  # the named protocols; JSON: {name: [blocks]}
 
 
 def to_dict(config: Config) -> dict:
     """Config as a JSON-ready dict, with the config version; conditions as an object keyed by name."""
     data = dataclasses.asdict(config)
     data["conditions"] = {c.pop("name"): c for c in data["conditions"]}
+    data["protocols"] = {p["name"]: p["blocks"] for p in data["protocols"]}
     return {"version": CONFIG_VERSION, **data}
 
 
@@ -224,10 +266,11 @@ def _check_type(name: str, value, default):
         ok = isinstance(value, (int, float)) and math.isfinite(value)
     elif isinstance(default, tuple):
         # Grids and the condition list have free length and a fixed element type; other tuples match the default.
-        free_length = name.endswith(("grid", "conditions"))  # train.conditions, eval.test_conditions
+        named = name.endswith(("conditions", "protocols"))  # train.conditions, train.protocols, eval.test_conditions
+        free_length = named or name.endswith("grid")
         ok = isinstance(value, tuple) and (free_length or len(value) == len(default))
         if ok and free_length:
-            ok = all(isinstance(v, str if name.endswith("conditions") else (int, float)) for v in value)
+            ok = all(isinstance(v, str if named else (int, float)) for v in value)
         elif ok:
             for i, (v, d) in enumerate(zip(value, default, strict=True)):
                 _check_type(f"{name}[{i}]", v, d)
@@ -286,10 +329,29 @@ def _conditions(raw, table: dict) -> tuple[ConditionConfig, ...]:
     if not isinstance(raw, dict):
         raise ValueError("conditions: expected an object of name: fields")
     for name, fields in raw.items():
-        if not name or any(c in name for c in ", ") or not name.isprintable():
-            raise ValueError(f"conditions.{printable(name)}: a name needs letters, without commas or spaces")
+        _check_name(f"conditions.{printable(name)}", name)
         table[name] = _build(ConditionConfig, fields, f"conditions.{name}", table.get(name, ConditionConfig(name)))
     return tuple(table.values())
+
+
+def _protocols(raw) -> tuple[ProtocolConfig, ...]:
+    """The protocols table: the shipped ones, with the entries of `raw` ({name: [blocks]}) added or replaced."""
+    if not isinstance(raw, dict):
+        raise ValueError("protocols: expected an object of name: [blocks]")
+    table = {p.name: p for p in PROTOCOLS}
+    for name, blocks in raw.items():
+        where = f"protocols.{printable(name)}"
+        _check_name(where, name)
+        if not isinstance(blocks, (list, tuple)) or not blocks:
+            raise ValueError(f"{where}: expected a list of blocks")
+        built = tuple(_build(BlockConfig, b, f"{where}[{i}]") for i, b in enumerate(blocks))
+        table[name] = ProtocolConfig(name, built)
+    return tuple(table.values())
+
+
+def _check_name(where: str, name: str) -> None:
+    if not name or any(c in name for c in ", ") or not name.isprintable():
+        raise ValueError(f"{where}: a name needs letters, without commas or spaces")
 
 
 def from_dict(data: dict) -> Config:
@@ -307,23 +369,26 @@ def from_dict(data: dict) -> Config:
         table = _migrate_force(data.pop("force"), table)
     sections = {}
     for f in dataclasses.fields(Config):
-        if f.name == "conditions":
+        if f.name in ("conditions", "protocols"):
             continue
         raw = data.pop(f.name, {})
         if isinstance(raw, dict):
             raw = {k: v for k, v in raw.items() if k not in RETIRED_FIELDS.get(f.name, ())}
         sections[f.name] = _build(f.default_factory, raw, f.name)
     conditions = _conditions(data.pop("conditions", {}), table)
+    protocols = _protocols(data.pop("protocols", {}))
     if data:
         raise ValueError(f"{printable(sorted(data)[0])}: unknown field")
-    _check_train(sections["train"], conditions)
     _check_learner(sections["learner"])
     _check_names("eval.test_conditions", sections["eval"].test_conditions, conditions)
-    return Config(**sections, conditions=conditions)
+    cfg = Config(**sections, conditions=conditions, protocols=protocols)
+    _check_protocols(cfg)
+    _check_train(cfg)
+    return cfg
 
 
-def _check_names(where: str, names: tuple[str, ...], conditions: tuple[ConditionConfig, ...]) -> None:
-    known = [c.name for c in conditions]
+def _check_names(where: str, names: tuple[str, ...], table: tuple) -> None:
+    known = [c.name for c in table]
     if not names or len(set(names)) != len(names) or any(n not in known for n in names):
         raise ValueError(f"{where}: must be distinct names from {', '.join(known)}")
 
@@ -334,14 +399,40 @@ def _check_learner(learner: LearnerConfig) -> None:
             raise ValueError(f"learner.{name}: must not be negative")
 
 
-def _check_train(train: TrainConfig, conditions: tuple[ConditionConfig, ...]) -> None:
+def _check_protocols(cfg: Config) -> None:
+    known = {c.name for c in cfg.conditions}
+    for p in cfg.protocols:
+        if p.name in known:
+            raise ValueError(f"protocols.{p.name}: a condition has that name")
+        for i, b in enumerate(p.blocks):
+            where = f"protocols.{p.name}[{i}]"
+            for name in ("condition", "catch_condition"):
+                if getattr(b, name) not in known:
+                    raise ValueError(f"{where}.{name}: must be a name from {', '.join(sorted(known))}")
+            if b.trials < 1:
+                raise ValueError(f"{where}.trials: must be at least 1")
+            if not 0.0 <= b.catch <= 1.0:
+                raise ValueError(f"{where}.catch: must be a probability in [0, 1]")
+
+
+def _check_train(cfg: Config) -> None:
+    train = cfg.train
     for name in ("trials", "seeds", "chunk_steps"):
         if getattr(train, name) < 1:
             raise ValueError(f"train.{name}: must be at least 1")
-    for name in ("seed", "keep_every"):
+    for name in ("seed", "keep_every", "trial_log_every"):
         if getattr(train, name) < 0:
             raise ValueError(f"train.{name}: must not be negative")
-    _check_names("train.conditions", train.conditions, conditions)
+    if not 0.0 < train.direction_time:
+        raise ValueError("train.direction_time: must be positive")
+    if train.conditions or not train.protocols:
+        _check_names("train.conditions", train.conditions, cfg.conditions)
+    if train.protocols:
+        _check_names("train.protocols", train.protocols, cfg.protocols)
+    for name in train.protocols:
+        total = sum(b.trials for b in blocks_of(cfg, name))
+        if total != train.trials:
+            raise ValueError(f"train.trials: {train.trials}, but protocol {name} lasts {total} trials")
     for name in ("lr_grid", "noise_grid", "lam_grid", "noise_final_ratio_grid", "noise_anneal_trials_grid"):
         if not all(math.isfinite(v) and v > 0 for v in getattr(train, name)):
             raise ValueError(f"train.{name}: must hold positive numbers")
@@ -388,3 +479,19 @@ def condition(cfg: Config, name: str) -> ConditionConfig:
         if c.name == name:
             return c
     raise ValueError(f"unknown condition {name!r}; choose from {', '.join(c.name for c in cfg.conditions)}")
+
+
+def blocks_of(cfg: Config, name: str) -> tuple[BlockConfig, ...]:
+    """Blocks of the protocol called `name`, or the one block of train.trials trials of the condition `name`."""
+    for p in cfg.protocols:
+        if p.name == name:
+            return p.blocks
+    return (BlockConfig(trials=cfg.train.trials, condition=condition(cfg, name).name, catch_condition=name),)
+
+
+def protocol_trials(raw_protocols: dict, name: str) -> int:
+    """Trials that protocol `name` lasts, in the shipped table with the JSON entries `raw_protocols` written over it."""
+    for p in _protocols(raw_protocols):
+        if p.name == name:
+            return sum(b.trials for b in p.blocks)
+    raise ValueError(f"unknown protocol {name!r}; choose from {', '.join(p.name for p in _protocols(raw_protocols))}")

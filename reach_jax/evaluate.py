@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, claims, fields, figures, impedance, sensor, stats, task
+from reach_jax import adaptation, batch, checkpoint, claims, fields, figures, impedance, sensor, stats, task
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import Config
 from reach_jax.episodes import FAIL, OUTCOME_NAMES, SUCCESS, Episode, n_steps, network_policy, run_episodes
@@ -635,6 +635,7 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
         )
     trials = np.asarray(data.batch.states.trials)
     return {
+        "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
         "table2": {**table, "chunk": data.chunk, "trials_per_network": [int(t) for t in trials]},
         "aftereffect": after,
         "quality": quality(lattice, data.learners, starts, targets, cfg),
@@ -664,19 +665,25 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: dict, out: Path 
     figures.fig4(results["panels"], *results["corners"], cfg).savefig(out / "fig4.png", dpi=110)
     figures.fig5(results["panels"], results["corners"][2], cfg).savefig(out / "fig5.png", dpi=110)
     figures.learning_curves(data.metrics, cfg).savefig(out / "learning_curves.png", dpi=110)
+    if results["adaptation"] is not None:
+        checkpoint.atomic_write_bytes(out / "adaptation.json", json.dumps(results["adaptation"], indent=2).encode())
+        text = adaptation.markdown(results["adaptation"], source)
+        checkpoint.atomic_write_bytes(out / "adaptation.md", text.encode())
+        figures.adaptation(results["adaptation"], cfg).savefig(out / "adaptation.png", dpi=110)
     return out
 
 
 def evaluate(run_dir: Path, checkpoint_path: Path | None = None, out: Path | None = None) -> dict:
     """Evaluate a run at its newest (or the given) checkpoint and write every file into `out` (default RUN_DIR/eval).
 
-    Returns the JSON-ready results, keyed by file: table2, aftereffect, quality, impedance, claims.
+    Returns the JSON-ready results, keyed by file: table2, aftereffect, quality, impedance, claims, and adaptation
+    (None for a run without protocol learners and a per-trial log).
     Raises CheckpointError (one line, naming the bad file) before anything is written.
     """
     run = run_dir_io.load(run_dir, checkpoint_path)
     results = evaluate_run(run)
     write_results(run_dir, run, results, out)
-    return {name: results[name] for name in RESULT_FILES}
+    return {name: results[name] for name in (*RESULT_FILES, "adaptation")}
 
 
 if __name__ == "__main__":

@@ -267,3 +267,60 @@ def impedance(summary: dict, gains: dict, learners, cfg: Config):
     fig.suptitle("Learned hand impedance at the states of each network's own test movements")
     fig.tight_layout()
     return fig
+
+
+ADAPTATION_PANELS = (
+    ("perp_cm", "perpendicular error\nat peak speed [cm]"),
+    ("direction_deg", "initial direction\nerror [deg]"),
+    ("success", "success rate"),
+)
+
+
+def _mean_curve(ax, group: list[dict], kind: str, key: str, label: str, **style) -> None:
+    """Each network's curve thin, and their mean (over the bins all of them have) thick."""
+    xs = [np.asarray(net["curves"][kind]["trial"]) for net in group]
+    ys = [np.asarray(net["curves"][kind][key]) for net in group]
+    for x, y in zip(xs, ys, strict=True):
+        ax.plot(x, y, lw=0.5, alpha=0.3, **style)
+    width = min((len(y) for y in ys), default=0)
+    if width:
+        mean = np.mean([y[:width] for y in ys], axis=0)
+        ax.plot(xs[0][:width], mean, lw=1.8, label=f"{label}, mean of {len(ys)}", **style)
+
+
+def adaptation(results: dict, cfg: Config):
+    """Adaptation curves of each protocol: field-aligned errors against trials, catch trials and control apart.
+
+    Args:
+      results: `adaptation.analyse` output.
+      cfg: the run's config.
+    """
+    protocols = results["protocols"]
+    rows = len(ADAPTATION_PANELS) * max(len(protocols), 1)
+    fig = Figure(figsize=(10, 2.6 * rows + 0.6))
+    axes = np.atleast_1d(fig.subplots(rows, 1, sharex=True))
+    for n, (name, p) in enumerate(protocols.items()):
+        for m, (key, label) in enumerate(ADAPTATION_PANELS):
+            ax = axes[n * len(ADAPTATION_PANELS) + m]
+            edge = 0
+            for b in p["blocks"]:
+                ax.axvspan(edge, edge + b["trials"], color=condition_color(b["condition"], cfg), alpha=0.08, lw=0)
+                if m == 0:
+                    ax.text(edge, 1.01, f" {b['condition']}", transform=ax.get_xaxis_transform(), fontsize=8)
+                edge += b["trials"]
+            if p["control"]:
+                _mean_curve(ax, p["controls"], "normal", key, f"control {p['control']}", color="0.45")
+            _mean_curve(ax, p["networks"], "normal", key, name, color="tab:blue")
+            _mean_curve(ax, p["networks"], "catch", key, f"{name}: catch trials", color="tab:red")
+            if key != "success":
+                ax.axhline(0.0, color="k", lw=0.6)
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+        top = axes[n * len(ADAPTATION_PANELS)]
+        top.legend(fontsize=8, loc="upper right")
+        top.set_title(
+            f"{name}: errors signed + where the {p['field']} field pushes, {p['window']:,}-trial bins", pad=16
+        )
+    axes[-1].set_xlabel("trial")
+    fig.tight_layout()
+    return fig

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from reach_jax.config import ArmConfig, ConditionConfig, Config, LearnerConfig, SensorConfig, condition
+from reach_jax.config import ArmConfig, ConditionConfig, Config, LearnerConfig, SensorConfig, blocks_of, condition
 
 # ---------------------------------------------------------------------------------------------------------------
 # Arm (eq. 4-5, model §1)
@@ -520,6 +520,7 @@ class Draws(NamedTuple):
     start: np.ndarray  # (2,)
     target: np.ndarray  # (K, 2) candidates
     force: np.ndarray  # (2,)
+    catch: float = 1.0  # below the block's catch probability: a catch trial (1 never is one)
 
 
 def touching(hand, target, cfg: Config) -> bool:
@@ -610,6 +611,43 @@ def update_curriculum(distance: float, goal: bool, drifted: bool, was_full: bool
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# Protocols (mirrors reach_jax.protocol)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+class Block(NamedTuple):
+    """One block of a protocol, with its conditions resolved."""
+
+    end: float  # trial index at which the block ends (inf for the last)
+    cond: Condition
+    catch: float  # catch-trial probability
+    catch_cond: Condition
+    learning: bool
+
+
+def make_plan(name: str, cfg: Config) -> list[Block]:
+    """Blocks of the protocol (or one-block condition) called `name`.
+
+    Args: name in cfg.protocols or cfg.conditions.
+    Returns: list of Block.
+    """
+    blocks, total, plan = blocks_of(cfg, name), 0, []
+    for i, b in enumerate(blocks):
+        total += b.trials
+        end = math.inf if i == len(blocks) - 1 else total
+        plan.append(
+            Block(end, make_condition(b.condition, cfg), b.catch, make_condition(b.catch_condition, cfg), b.learning)
+        )
+    return plan
+
+
+def trial_condition(plan: list[Block], trial: int, catch_draw: float) -> tuple[Condition, bool]:
+    """(condition, learning) of trial index `trial` given its catch draw in [0, 1)."""
+    block = next(b for b in plan if trial < b.end)
+    return (block.catch_cond if catch_draw < block.catch else block.cond), block.learning
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # Learner step (mirrors reach_jax.rollout.learner_step)
 # ---------------------------------------------------------------------------------------------------------------
 
@@ -629,6 +667,9 @@ class Learner:
     drifted: bool  # the target drifted in this trial
     n_max: float  # N_max [steps]
     distance: float  # curriculum distance [m]
+    cond: Condition  # this trial's condition
+    learning: bool = True  # this trial's block updates the weights
+    pending_learning: bool = True  # the pending step's block updates the weights
     was_full: bool = False  # the distance has reached the whole field
     trials: int = 0  # trials ended
     steps: int = 0  # steps taken
@@ -647,10 +688,10 @@ class StepRecord(NamedTuple):
     loss: float
 
 
-def learner_from_jax(state) -> Learner:
-    """Copy of a `reach_jax.rollout.LearnerState` (one learner).
+def learner_from_jax(state, cond: Condition) -> Learner:
+    """Copy of a `reach_jax.rollout.LearnerState` (one learner) whose trial runs in `cond`.
 
-    Args: state with (4,) arm, (2,) target etc.
+    Args: state with (4,) arm, (2,) target etc.; cond the oracle's copy of state.cond.
     Returns: a Learner.
     """
     pend = state.pending
@@ -673,20 +714,24 @@ def learner_from_jax(state) -> Learner:
         drifted=bool(state.drifted),
         n_max=float(state.n_max),
         distance=float(state.distance),
+        cond=cond,
+        learning=bool(state.learning),
+        pending_learning=bool(state.pending_learning),
         was_full=bool(state.full_at >= 0),
         trials=int(state.trials),
         steps=int(state.steps),
     )
 
 
-def learner_step(lrn: Learner, cond: Condition, lr: float, lam: float, rnd, draws: Draws, cfg: Config):
-    """One step: observe, forward, TS update, act, RK4, outcome, reset.
+def learner_step(lrn: Learner, plan: list[Block], lr: float, lam: float, rnd, draws: Draws, cfg: Config):
+    """One step: observe, forward, TS update, act, RK4, outcome, reset into the plan's next trial.
 
-    Args: rnd (2,) noise in actor units, draws for a new trial.
+    Args: plan the learner's blocks, rnd (2,) noise in actor units, draws for a new trial.
     Returns: (Learner, StepRecord).
     """
+    cond = lrn.cond
     x = observe(lrn.arm, lrn.prev_arm, lrn.prev_tau, lrn.target, cond.input_mask, cfg)
-    layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg)
+    layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr if lrn.pending_learning else 0.0, cfg)
     rnd = np.array(rnd, dtype=np.float64)
     tau = torque(out[1:], rnd, cfg)
     moved = arm_step(lrn.arm, tau, cond.field, lrn.force, cfg.arm)
@@ -701,13 +746,14 @@ def learner_step(lrn: Learner, cond: Condition, lr: float, lam: float, rnd, draw
     reward = lc.reward_goal if goal else (lc.reward_out if out_of_range else 0.0)
     pending = Pending(x=x, out=out, rnd=rnd, valid=not cap, terminal=goal or out_of_range, reward=reward)
 
-    new = replace(lrn, layers=layers, pending=pending, steps=lrn.steps + 1)
+    new = replace(lrn, layers=layers, pending=pending, steps=lrn.steps + 1, pending_learning=lrn.learning)
     if goal:
         new.n_max = update_n_max(lrn.n_max, t, lam)
     if done:
         new.distance = update_curriculum(lrn.distance, goal, lrn.drifted, lrn.was_full, cfg)
         new.was_full = lrn.was_full or new.distance >= curriculum_bounds(cfg)[1]
-        start, target, force = place_trial(draws, new.distance, cond.field, cfg)
+        new.cond, new.learning = trial_condition(plan, lrn.trials + 1, draws.catch)
+        start, target, force = place_trial(draws, new.distance, new.cond.field, cfg)
         new.arm, new.prev_arm, new.prev_tau = start, start.copy(), np.zeros(2)
         new.target, new.force, new.t, new.drifted = target, force, 0, False
         new.trials = lrn.trials + 1
@@ -722,20 +768,22 @@ def draw_trial(rng: np.random.Generator, cfg: Config) -> Draws:
     """Fresh uniform draws for one trial.
 
     Args: rng numpy Generator.
-    Returns: Draws (start (2,), target (K, 2), force (2,)).
+    Returns: Draws (start (2,), target (K, 2), force (2,), catch).
     """
-    return Draws(rng.random(2), rng.random((cfg.task.target_candidates, 2)), rng.random(2))
+    return Draws(rng.random(2), rng.random((cfg.task.target_candidates, 2)), rng.random(2), rng.random())
 
 
-def init_learner(rng: np.random.Generator, cond: Condition, cfg: Config) -> Learner:
-    """Fresh NumPy learner at the initial curriculum distance.
+def init_learner(rng: np.random.Generator, plan: list[Block], cfg: Config) -> Learner:
+    """Fresh NumPy learner at the initial curriculum distance, in its plan's first trial.
 
-    Args: rng numpy Generator, cond.
+    Args: rng numpy Generator, plan.
     Returns: a Learner.
     """
+    draws = draw_trial(rng, cfg)
+    cond, learning = trial_condition(plan, 0, draws.catch)
     n_in = cond.input_mask.shape[0]
     distance = curriculum_bounds(cfg)[0]
-    start, target, force = place_trial(draw_trial(rng, cfg), distance, cond.field, cfg)
+    start, target, force = place_trial(draws, distance, cond.field, cfg)
     return Learner(
         layers=init_layers(rng, cfg),
         arm=start,
@@ -748,6 +796,9 @@ def init_learner(rng: np.random.Generator, cond: Condition, cfg: Config) -> Lear
         drifted=False,
         n_max=cfg.learner.n_max_init,
         distance=distance,
+        cond=cond,
+        learning=learning,
+        pending_learning=learning,
         was_full=distance >= curriculum_bounds(cfg)[1],
     )
 
@@ -759,13 +810,13 @@ def run_reference(n_steps: int, seed: int, cfg: Config, condition: str = "none")
     Returns: (Learner, dict of outcome counts).
     """
     rng = np.random.default_rng(seed)
-    cond = make_condition(condition, cfg)
-    lrn = init_learner(rng, cond, cfg)
+    plan = make_plan(condition, cfg)
+    lrn = init_learner(rng, plan, cfg)
     lc = cfg.learner
     counts = {"goals": 0, "outs": 0, "caps": 0}
     for _ in range(n_steps):
         rnd = rng.uniform(-lc.noise, lc.noise, 2)
-        lrn, rec = learner_step(lrn, cond, lc.lr, lc.lam, rnd, draw_trial(rng, cfg), cfg)
+        lrn, rec = learner_step(lrn, plan, lc.lr, lc.lam, rnd, draw_trial(rng, cfg), cfg)
         counts["goals"] += rec.goal
         counts["outs"] += rec.out_of_range
         counts["caps"] += rec.cap

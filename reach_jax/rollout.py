@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from flax import struct
 from jax.sharding import PartitionSpec
 
-from reach_jax import arm, distribute, encoding, learner, network, task
+from reach_jax import arm, distribute, encoding, learner, network, protocol, task, trial_log
 from reach_jax.config import Config, n_inputs
 
 MAX_HIDDEN_PAD = 128  # largest Speed.hidden_pad: a TPU vector row of float32; wider only wastes memory
@@ -109,6 +109,11 @@ class LearnerState:
     prev_tau: jax.Array  # (2,) torques one step before [N m] (0 at a trial's first step)
     target: jax.Array  # (2,) target position [m]
     force: jax.Array  # (2,) this trial's constant hand force [N]
+    cond: task.Condition  # this trial's condition (`protocol.trial_condition`)
+    learning: jax.Array  # () bool: this trial's block updates the weights
+    pending_learning: jax.Array  # () bool: the block of the pending step's trial updates the weights
+    block: jax.Array  # () int32 this trial's protocol block
+    catch: jax.Array  # () bool: this trial is a catch trial
     pending: learner.Pending  # the step awaiting its TS update
     t: jax.Array  # () steps taken in this trial
     drifted: jax.Array  # () bool: the target drifted in this trial
@@ -118,6 +123,7 @@ class LearnerState:
     trials: jax.Array  # () trials ended since the start of training
     steps: jax.Array  # () steps taken since the start of training
     stats: Stats  # counters since the last chunk boundary
+    trace: trial_log.TrialTrace | None = None  # this trial's movement so far; None without a per-trial log
 
 
 class StepInfo(NamedTuple):
@@ -133,13 +139,17 @@ class StepInfo(NamedTuple):
     out_of_range: jax.Array  # () bool
     cap: jax.Array  # () bool
     loss: jax.Array  # () squared-error loss of the update
+    ended: jax.Array  # () bool: this step ended a trial
+    record: jax.Array | None  # (len(trial_log.COLUMNS),) the ended trial's record; None without a per-trial log
 
 
-def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerState:
-    """Fresh learner: new weights, first trial at the initial curriculum distance."""
+def init_learner(key: jax.Array, plan: protocol.Plan, cfg: Config) -> LearnerState:
+    """Fresh learner: new weights, first trial at the initial curriculum distance in its plan's first condition."""
     k_param, k_trial, k_run = jax.random.split(key, 3)
     distance, full = (jnp.asarray(b) for b in task.curriculum_bounds(cfg))
-    start, target, force = task.place_trial(task.draw_trial(k_trial, cfg), distance, cond.field, cfg)
+    draws = task.draw_trial(k_trial, cfg)
+    cond, learning, block, catch = protocol.trial_condition(plan, jnp.array(0, jnp.int32), draws.catch)
+    start, target, force = task.place_trial(draws, distance, cond.field, cfg)
     return LearnerState(
         params=network.init_params(k_param, cfg),
         key=k_run,
@@ -148,6 +158,11 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
         prev_tau=jnp.zeros(2),
         target=target,
         force=force,
+        cond=cond,
+        learning=learning,
+        pending_learning=learning,
+        block=block,
+        catch=catch,
         pending=learner.empty_pending(
             n_inputs(cfg), cfg.network.hidden[0], encoding.coded_support(start, start, jnp.zeros(2), cfg)
         ),
@@ -159,12 +174,17 @@ def init_learner(key: jax.Array, cond: task.Condition, cfg: Config) -> LearnerSt
         trials=jnp.array(0, jnp.int32),
         steps=jnp.array(0, jnp.int32),
         stats=zero_stats(),
+        trace=trial_log.start_trace(start, target, cfg) if cfg.train.trial_log_every else None,
     )
 
 
 def n_uniforms(cfg: Config) -> int:
-    """Uniform draws one step consumes: 2 for the exploration noise, then one new trial's TrialDraws."""
-    return 2 + 2 + 2 * cfg.task.target_candidates + 2
+    """Uniform draws one step consumes: 2 for the exploration noise, then one new trial's TrialDraws.
+
+    The catch draw comes last: a longer draw leaves the earlier values unchanged (threefry is partitionable),
+    so adding it left every earlier run's stream as it was.
+    """
+    return 2 + 2 + 2 * cfg.task.target_candidates + 2 + 1
 
 
 def step_uniforms(key: jax.Array, first_step: jax.Array, n_steps: int, cfg: Config) -> jax.Array:
@@ -182,14 +202,16 @@ def split_uniforms(u: jax.Array, noise: jax.Array, cfg: Config) -> tuple[jax.Arr
     """(n_uniforms,) draws in [0, 1) -> ((2,) rnd ~ U(-noise, noise), TrialDraws of a possible new trial)."""
     k = cfg.task.target_candidates
     rnd = noise * (2.0 * u[:2] - 1.0)
-    draws = task.TrialDraws(start=u[2:4], target=u[4 : 4 + 2 * k].reshape(k, 2), force=u[4 + 2 * k : 6 + 2 * k])
+    draws = task.TrialDraws(
+        start=u[2:4], target=u[4 : 4 + 2 * k].reshape(k, 2), force=u[4 + 2 * k : 6 + 2 * k], catch=u[6 + 2 * k]
+    )
     return rnd, draws
 
 
 def learner_step(
     state: LearnerState,
     u: jax.Array,
-    cond: task.Condition,
+    plan: protocol.Plan,
     hyper: Hyper,
     cfg: Config,
     active=None,
@@ -200,7 +222,7 @@ def learner_step(
     Args:
       state: the learner.
       u: (n_uniforms,) this step's draws in [0, 1) (`step_uniforms`).
-      cond: its condition.
+      plan: its protocol, which picks the condition of each new trial.
       hyper: its learning constants.
       cfg: model config.
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
@@ -208,9 +230,11 @@ def learner_step(
     """
     bound = exploration_bound(hyper, state.trials, state.full_at)
     rnd, draws = split_uniforms(u, bound, cfg)
+    cond = state.cond
     x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
     rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)  # carried in the pending step
-    lr = hyper.lr if active is None else jnp.where(active, hyper.lr, 0.0)
+    learns = state.pending_learning if active is None else active & state.pending_learning
+    lr = jnp.where(learns, hyper.lr, 0.0)
     sparse = speed.sparse_layer1
     pending_in = state.pending if sparse else state.pending._replace(rows=None)
     params, out, loss, u1 = learner.ts_step(state.params, x, pending_in, state.n_max, lr, cfg, rows if sparse else None)
@@ -245,6 +269,10 @@ def learner_step(
         prev_tau=tau,
         target=target,
         force=state.force,
+        cond=state.cond,
+        learning=state.learning,
+        block=state.block,
+        catch=state.catch,
         t=t,
         drifted=state.drifted | moved_target,
     )
@@ -257,16 +285,27 @@ def learner_step(
     )
     first_full = ~was_full & (distance >= task.curriculum_bounds(cfg)[1])
     full_at = jnp.where(first_full, state.trials + done, state.full_at)
-    start, new_target, force = task.place_trial(draws, distance, cond.field, cfg)
+    new_cond, learning, block, catch = protocol.trial_condition(plan, state.trials + done, draws.catch)
+    start, new_target, force = task.place_trial(draws, distance, new_cond.field, cfg)
     fresh = dict(
         arm=start,
         prev_arm=start,
         prev_tau=jnp.zeros(2),
         target=new_target,
         force=force,
+        cond=new_cond,
+        learning=learning,
+        block=block,
+        catch=catch,
         t=jnp.array(0, jnp.int32),
         drifted=jnp.array(False),
     )
+    record = None
+    if state.trace is not None:
+        trace = trial_log.advance(state.trace, moved, t, cfg)
+        record = trial_log.record(trace, state.block, state.catch, goal, out_of_range, t, cfg)
+        cont["trace"] = trace
+        fresh["trace"] = trial_log.start_trace(start, new_target, cfg)
     nxt = jax.tree.map(lambda a, b: jnp.where(done, a, b), fresh, cont)
 
     s = state.stats
@@ -281,6 +320,7 @@ def learner_step(
     new = state.replace(
         params=params,
         pending=pending,
+        pending_learning=state.learning,
         n_max=n_max,
         distance=distance,
         full_at=full_at,
@@ -290,7 +330,18 @@ def learner_step(
         **nxt,
     )
     info = StepInfo(
-        x=x, out=out, rnd=rnd, tau=tau, arm=moved, draws=draws, goal=goal, out_of_range=out_of_range, cap=cap, loss=loss
+        x=x,
+        out=out,
+        rnd=rnd,
+        tau=tau,
+        arm=moved,
+        draws=draws,
+        goal=goal,
+        out_of_range=out_of_range,
+        cap=cap,
+        loss=loss,
+        ended=done,
+        record=record,
     )
     return new, info
 
@@ -298,7 +349,7 @@ def learner_step(
 def budgeted_step(
     state: LearnerState,
     u: jax.Array,
-    cond: task.Condition,
+    plan: protocol.Plan,
     hyper: Hyper,
     budget: jax.Array,
     cfg: Config,
@@ -307,24 +358,24 @@ def budgeted_step(
     """learner_step, except that a learner which has ended `budget` trials stays frozen.
 
     Args:
-      state, u, cond, hyper, speed: one learner, as for learner_step.
+      state, u, plan, hyper, speed: one learner, as for learner_step.
       budget: () trials per learner.
       cfg: model config.
     """
     active = state.trials < budget
-    new, info = learner_step(state, u, cond, hyper, cfg, active=active, speed=speed)
+    new, info = learner_step(state, u, plan, hyper, cfg, active=active, speed=speed)
     # The weights of a frozen learner already stay put (zero step size), so the select skips the
     # largest arrays instead of copying them once more every step.
     rest = jax.tree.map(lambda a, b: jnp.where(active, a, b), new.replace(params=None), state.replace(params=None))
-    return rest.replace(params=new.params), info
+    return rest.replace(params=new.params), info._replace(ended=info.ended & active)
 
 
-def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED):
-    """lax.scan of `step(state, u) -> (state, info)` over n_steps, drawing uniforms speed.draw_block steps at a time.
+def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED, log=None):
+    """lax.scan of `step((state, log), u) -> ((state, log), info)` over n_steps, drawing uniforms in blocks.
 
-    Drawing a block in one vectorised call keeps the random-number loop out of the per-step body, where it
-    cost as many kernel launches as the rest of the step. The stream does not depend on the block size.
-    The steps run on `widen_hidden` weights; the state goes in and comes out with the paper's widths.
+    Drawing speed.draw_block steps' uniforms in one vectorised call keeps the random-number loop out of the
+    per-step body, where it cost as many kernel launches as the rest of the step. The stream does not depend on
+    the block size. The steps run on `widen_hidden` weights; the state goes in and comes out with the paper's widths.
 
     Args:
       step: one step of one learner, or of a batch when `batched`.
@@ -333,9 +384,10 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
       cfg: model config.
       batched: state and step carry a leading learner axis.
       speed: the draw block and the hidden padding.
+      log: carried alongside the state for the step to fill (the per-trial log, `TrialBuffer`), or None.
 
     Returns:
-      (state after n_steps, info stacked over the steps).
+      (state after n_steps, log after them, info stacked over the steps).
     """
 
     def draws(s: LearnerState, n: int) -> jax.Array:
@@ -344,18 +396,48 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
         u = jax.vmap(lambda k, first: step_uniforms(k, first, n, cfg))(s.key, s.steps)
         return jnp.swapaxes(u, 0, 1)
 
-    def block_body(s, _):
-        return jax.lax.scan(step, s, draws(s, block))
+    def block_body(carry, _):
+        return jax.lax.scan(step, carry, draws(carry[0], block))
 
     block = speed.draw_block
     n_blocks, rest = divmod(n_steps, block)
-    state = widen_hidden(state, speed.hidden_pad)
-    state, info = jax.lax.scan(block_body, state, None, length=n_blocks)
+    carry = (widen_hidden(state, speed.hidden_pad), log)
+    carry, info = jax.lax.scan(block_body, carry, None, length=n_blocks)
     info = jax.tree.map(lambda a: a.reshape(n_blocks * block, *a.shape[2:]), info)
     if rest:
-        state, tail = jax.lax.scan(step, state, draws(state, rest))
+        carry, tail = jax.lax.scan(step, carry, draws(carry[0], rest))
         info = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), info, tail)
-    return narrow_hidden(state, cfg), info
+    state, log = carry
+    return narrow_hidden(state, cfg), log, info
+
+
+class TrialBuffer(NamedTuple):
+    """One learner's per-trial records of a chunk (`trial_log`), filled from the front."""
+
+    rows: jax.Array  # (capacity, len(trial_log.COLUMNS)) float32 records
+    trial: jax.Array  # (capacity,) int32 index of each recorded trial over the learner's life
+    count: jax.Array  # () int32 records written
+
+
+def empty_buffer(cfg: Config) -> TrialBuffer:
+    """A buffer that holds every logged trial of one chunk: at most one trial ends per step."""
+    capacity = cfg.train.chunk_steps // max(cfg.train.trial_log_every, 1) + 1
+    return TrialBuffer(
+        rows=jnp.zeros((capacity, len(trial_log.COLUMNS)), jnp.float32),
+        trial=jnp.zeros(capacity, jnp.int32),
+        count=jnp.array(0, jnp.int32),
+    )
+
+
+def log_trial(buffer: TrialBuffer, info: StepInfo, trial: jax.Array, every: int) -> TrialBuffer:
+    """buffer with the trial that `info`'s step ended, if it ended one whose index `trial` is a multiple of `every`."""
+    keep = info.ended & (trial % every == 0)
+    i = jnp.minimum(buffer.count, buffer.trial.shape[0] - 1)
+    return TrialBuffer(
+        rows=buffer.rows.at[i].set(jnp.where(keep, info.record, buffer.rows[i])),
+        trial=buffer.trial.at[i].set(jnp.where(keep, trial, buffer.trial[i])),
+        count=buffer.count + keep,
+    )
 
 
 def widen_hidden(state: LearnerState, multiple: int) -> LearnerState:
@@ -379,11 +461,13 @@ def narrow_hidden(state: LearnerState, cfg: Config) -> LearnerState:
 
 
 def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_SPEED):
-    """Compiled run of n_steps steps for a batch of learners: (states, conds, hypers, budget) -> states.
+    """Compiled run of n_steps steps for a batch of learners: (states, plans, hypers, budget) -> (states, log).
 
     The learner axis is the leading axis of every argument; `budget` is a () trial count per learner.
-    Stats are reset at the start of the chunk, so they describe this chunk alone. The learner axis is
-    sharded over `distribute.learner_mesh(n_learners, devices)`; the states buffers are donated (speed.donate).
+    Stats are reset at the start of the chunk, so they describe this chunk alone. `log` is a TrialBuffer per
+    learner of the trials logged in the chunk (cfg.train.trial_log_every), or None without a per-trial log.
+    The learner axis is sharded over `distribute.learner_mesh(n_learners, devices)`; the states buffers are
+    donated (speed.donate).
 
     Args:
       cfg: model config.
@@ -391,19 +475,27 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_S
       devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
       speed: how the loop is compiled; the result does not depend on it.
     """
-    batched = jax.vmap(lambda s, u, c, h, b: budgeted_step(s, u, c, h, b, cfg, speed)[0], in_axes=(0, 0, 0, 0, None))
+    every = cfg.train.trial_log_every
+    batched = jax.vmap(lambda s, u, p, h, b: budgeted_step(s, u, p, h, b, cfg, speed), in_axes=(0, 0, 0, 0, None))
 
-    def chunk(states, conds, hypers, budget):
+    def chunk(states, plans, hypers, budget):
         states = states.replace(stats=jax.tree.map(jnp.zeros_like, states.stats))
+        n_learners = states.trials.shape[0]
+        log = jax.vmap(lambda _: empty_buffer(cfg))(jnp.arange(n_learners)) if every else None
 
         def step_body(carry, u):
-            return batched(carry, u, conds, hypers, budget), None
+            s, buffers = carry
+            new, info = batched(s, u, plans, hypers, budget)
+            if buffers is not None:
+                buffers = jax.vmap(lambda b, i, n: log_trial(b, i, n, every))(buffers, info, s.trials)
+            return (new, buffers), None
 
-        return scan_steps(step_body, states, n_steps, cfg, batched=True, speed=speed)[0]
+        states, log, _ = scan_steps(step_body, states, n_steps, cfg, batched=True, speed=speed, log=log)
+        return states, log
 
     compiled, donated = {}, (0,) if speed.donate else ()
 
-    def run(states, conds, hypers, budget):
+    def run(states, plans, hypers, budget):
         n_learners = jax.tree.leaves(states)[0].shape[0]
         mesh = distribute.learner_mesh(n_learners, devices)
         if mesh.size not in compiled:
@@ -417,8 +509,8 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_S
                 compiled[mesh.size] = (mesh, jax.jit(mapped, donate_argnums=donated))
         mesh, fn = compiled[mesh.size]
         if mesh is not None:
-            states, conds, hypers = (distribute.on_mesh(t, mesh) for t in (states, conds, hypers))
-        return fn(states, conds, hypers, budget)
+            states, plans, hypers = (distribute.on_mesh(t, mesh) for t in (states, plans, hypers))
+        return fn(states, plans, hypers, budget)
 
     return run
 
@@ -426,10 +518,12 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_S
 def make_trace(cfg: Config, n_steps: int, speed: Speed = DEFAULT_SPEED):
     """Compiled run of one learner that also returns the StepInfo of every step (for tests and plots)."""
 
-    def trace(state, cond, hyper):
+    def trace(state, plan, hyper):
         def step_body(carry, u):
-            return learner_step(carry, u, cond, hyper, cfg, speed=speed)
+            new, info = learner_step(carry[0], u, plan, hyper, cfg, speed=speed)
+            return (new, None), info
 
-        return scan_steps(step_body, state, n_steps, cfg, speed=speed)
+        state, _, info = scan_steps(step_body, state, n_steps, cfg, speed=speed)
+        return state, info
 
     return jax.jit(trace)

@@ -1,7 +1,8 @@
 """Run directories: the one reader and writer of config.json, metrics.jsonl and the learners' checkpoints.
 
 Layout of RUN_DIR: config.json (the whole Config), metrics.jsonl (one JSON object per learner per chunk,
-appended), checkpoints/chunk_NNNNNNN.npz (`checkpoint`), and eval/ (written by `evaluate`).
+appended), checkpoints/chunk_NNNNNNN.npz (`checkpoint`), trials/ (the per-trial log, with train.trial_log_every)
+and eval/ (written by `evaluate`).
 Every failure to read is a CheckpointError whose one-line message names the file and the field.
 """
 
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 from typing import NamedTuple
 
@@ -16,12 +18,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint
+from reach_jax import batch, checkpoint, trial_log
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config, first_difference, from_dict, to_dict, to_json
 
 CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.jsonl"
+TRIALS_DIR = "trials"  # the per-trial log: one little-endian binary file per column, appended chunk by chunk
+TRIAL_KEYS = {"learner": "<i4", "trial": "<i4", "chunk": "<i4"}  # columns the shell adds to trial_log.COLUMNS
+# LearnerState fields that checkpoints written before protocols lack (each is filled from a fresh batch).
+ADDED_STATE_FIELDS = ("cond", "learning", "pending_learning", "block", "catch")
 
 
 def read_config(run_dir: Path) -> Config:
@@ -47,6 +53,8 @@ def create(run_dir: Path, cfg: Config) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
     checkpoint.atomic_write_bytes(run_dir / CONFIG_FILE, to_json(cfg).encode())
     (run_dir / METRICS_FILE).unlink(missing_ok=True)
+    for name in trial_columns():
+        (run_dir / TRIALS_DIR / f"{name}.bin").unlink(missing_ok=True)
 
 
 def holds_run(run_dir: Path) -> bool:
@@ -101,6 +109,54 @@ def truncate_metrics(run_dir: Path, chunk: int) -> None:
     checkpoint.atomic_write_bytes(path, "".join(x + "\n" for x in keep).encode())
 
 
+def trial_columns() -> dict[str, str]:
+    """Every column of the per-trial log and its NumPy dtype."""
+    return {**TRIAL_KEYS, **{name: "<f4" for name in trial_log.COLUMNS}}
+
+
+def append_trials(run_dir: Path, columns: dict[str, np.ndarray]) -> None:
+    """Append records (one array per column of `trial_columns`, equal lengths) to the run's per-trial log."""
+    folder = Path(run_dir) / TRIALS_DIR
+    folder.mkdir(exist_ok=True)
+    for name, dtype in trial_columns().items():
+        with open(folder / f"{name}.bin", "ab") as f:
+            f.write(np.asarray(columns[name], dtype).tobytes())
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def _trial_lengths(folder: Path) -> int:
+    """Records that every column holds (a kill mid-append leaves some columns longer)."""
+    sizes = [
+        (folder / f"{n}.bin").stat().st_size // np.dtype(d).itemsize if (folder / f"{n}.bin").exists() else 0
+        for n, d in trial_columns().items()
+    ]
+    return min(sizes)
+
+
+def read_trials(run_dir: Path, up_to_chunk: float = math.inf) -> dict[str, np.ndarray] | None:
+    """The per-trial log up to a chunk, one array per column; None when the run keeps none."""
+    folder = Path(run_dir) / TRIALS_DIR
+    if not folder.is_dir():
+        return None
+    n = _trial_lengths(folder)
+    columns = {name: np.fromfile(folder / f"{name}.bin", dtype, count=n) for name, dtype in trial_columns().items()}
+    keep = int(np.searchsorted(columns["chunk"], up_to_chunk, side="right"))
+    return {name: column[:keep] for name, column in columns.items()}
+
+
+def truncate_trials(run_dir: Path, chunk: int) -> None:
+    """Drop per-trial records past `chunk` (and any torn tail); a resumed run then appends after them."""
+    folder = Path(run_dir) / TRIALS_DIR
+    if not folder.is_dir():
+        return
+    keep = len(read_trials(run_dir, chunk)["chunk"])
+    for name, dtype in trial_columns().items():
+        path = folder / f"{name}.bin"
+        if path.exists():
+            os.truncate(path, keep * np.dtype(dtype).itemsize)
+
+
 def write_checkpoint(run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config) -> Path:
     """Save the learner states and hyperparameters after `chunk` chunks, with the config as the run's identity."""
     tree = {"states": learners.states, "hypers": learners.hypers}
@@ -116,10 +172,17 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[ba
     if path is None and not ckpts:
         raise CheckpointError(f"{Path(run_dir) / checkpoint.CHECKPOINT_DIR}: no checkpoints")
     path = path or ckpts[-1]
-    fresh = jax.eval_shape(lambda: batch.init_batch(cfg))
-    # Hyperparameters added since the checkpoint was written take their values from the config.
-    defaults = {"hypers": jax.tree.map(np.asarray, batch.hyper_columns(cfg))}
-    tree, meta = checkpoint.load(path, {"states": fresh.states, "hypers": fresh.hypers}, defaults)
+    fresh = batch.init_batch(cfg)
+    template = {"states": fresh.states, "hypers": fresh.hypers}
+    # Hyperparameters added since the checkpoint was written take their values from the config, and so do the
+    # fields that say which condition and block a trial runs in: without a protocol they never change.
+    added = tuple(f".{name}" for name in ADDED_STATE_FIELDS)
+    defaults = {
+        name: leaf
+        for name, leaf in checkpoint.flatten(template).items()
+        if name.startswith("['hypers']") or name.removeprefix("['states']").startswith(added)
+    }
+    tree, meta = checkpoint.load(path, template, defaults)
     try:
         # Through from_dict, so a field added to the config since the checkpoint reads as its default.
         stored = from_dict(meta["config"])
@@ -129,7 +192,7 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[ba
     if diff:
         raise CheckpointError(f"{path}: field config.{diff} disagrees with {CONFIG_FILE}")
     states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
-    return batch.Batch(states, batch.conditions(cfg), hypers), int(meta["chunk"])
+    return batch.Batch(states, fresh.conds, hypers, fresh.plans), int(meta["chunk"])
 
 
 class Run(NamedTuple):
@@ -140,6 +203,7 @@ class Run(NamedTuple):
     chunk: int  # chunks trained at the checkpoint
     learners: list  # (condition, seed index) per learner, `batch.learner_table`
     metrics: list  # metrics.jsonl rows up to `chunk`
+    trials: dict | None  # the per-trial log up to `chunk` (`read_trials`); None when the run keeps none
 
 
 def load(run_dir: Path, path: Path | None = None) -> Run:
@@ -151,7 +215,8 @@ def load(run_dir: Path, path: Path | None = None) -> Run:
         raise CheckpointError(f"{path}: no such checkpoint")
     cfg = read_config(run_dir)
     learners, chunk = load_batch(run_dir, cfg, path)
-    return Run(cfg, learners, chunk, batch.learner_table(cfg.train), read_metrics(run_dir, chunk))
+    table = batch.learner_table(cfg.train)
+    return Run(cfg, learners, chunk, table, read_metrics(run_dir, chunk), read_trials(run_dir, chunk))
 
 
 def load_params(run_dir: Path, path: Path | None = None) -> tuple[dict, list[tuple[str, int]]]:
@@ -167,3 +232,20 @@ def load_params(run_dir: Path, path: Path | None = None) -> tuple[dict, list[tup
     """
     run = load(run_dir, path)
     return run.batch.states.params, run.learners
+
+
+MODEL_SECTIONS = ("arm", "sensor", "encoding", "network")  # what a network's weights mean
+
+
+def load_networks(cfg: Config) -> tuple:
+    """(LearnerState, learner table) at the last checkpoint of cfg.train.init_from, whose model must be cfg's.
+
+    Raises CheckpointError naming the run and the first model field that differs.
+    """
+    source = Path(cfg.train.init_from)
+    stored = read_config(source)
+    for section in MODEL_SECTIONS:
+        if getattr(stored, section) != getattr(cfg, section):
+            raise CheckpointError(f"train.init_from: {source} has another {section} section than this run")
+    learners, _ = load_batch(source, stored)
+    return learners.states, batch.learner_table(stored.train)

@@ -43,15 +43,18 @@ class TrialDraws(NamedTuple):
     start: jax.Array  # (2,) start position within the field
     target: jax.Array  # (K, 2) candidate targets within the curriculum box
     force: jax.Array  # (2,) constant force
+    catch: jax.Array  # () whether the trial is a catch trial (`protocol.trial_condition`)
 
 
 def draw_trial(key: jax.Array, cfg: Config) -> TrialDraws:
     """Fresh uniform draws for one trial."""
     k1, k2, k3 = jax.random.split(key, 3)
+    last = jax.random.uniform(k3, (3,))  # the force's two draws are those of a (2,) draw: runs before catch trials
     return TrialDraws(
         start=jax.random.uniform(k1, (2,)),
         target=jax.random.uniform(k2, (cfg.task.target_candidates, 2)),
-        force=jax.random.uniform(k3, (2,)),
+        force=last[:2],
+        catch=last[2],
     )
 
 

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, distribute, rollout
+from reach_jax import batch, checkpoint, distribute, rollout, trial_log
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import Config, TrainConfig
 from reach_jax.progress import LearnerEta, Progress, pow2_batch
@@ -26,13 +26,13 @@ class NumericsError(RuntimeError):
 
 
 def make_train(cfg: Config, n_steps: int):
-    """Pure `train(key, cond, hyper) -> LearnerState` for one learner; jit(vmap(train)) trains many."""
+    """Pure `train(key, plan, hyper) -> LearnerState` for one learner; jit(vmap(train)) trains many."""
 
-    def train(key, cond, hyper):
-        def step_body(state, u):
-            return rollout.learner_step(state, u, cond, hyper, cfg)[0], None
+    def train(key, plan, hyper):
+        def step_body(carry, u):
+            return (rollout.learner_step(carry[0], u, plan, hyper, cfg)[0], None), None
 
-        return rollout.scan_steps(step_body, rollout.init_learner(key, cond, cfg), n_steps, cfg)[0]
+        return rollout.scan_steps(step_body, rollout.init_learner(key, plan, cfg), n_steps, cfg)[0]
 
     return train
 
@@ -49,7 +49,7 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
     """One metrics record per learner for the chunk just run."""
     s = jax.device_get(states.stats)
     trials, steps = np.asarray(states.trials), np.asarray(states.steps)
-    distance, n_max = np.asarray(states.distance), np.asarray(states.n_max)
+    distance, n_max, block = np.asarray(states.distance), np.asarray(states.n_max), np.asarray(states.block)
     hypers = batch.learner_hypers(cfg)
     bound = np.asarray(rollout.exploration_bound(batch.hyper_columns(cfg), states.trials, states.full_at))
     rows = []
@@ -79,6 +79,7 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
                 "distance_m": float(distance[i]),
                 "n_max": float(n_max[i]),
                 "exploration": float(bound[i]),
+                "block": int(block[i]),
                 "wall_s": round(wall, 3),
             }
         )
@@ -128,9 +129,24 @@ def merge_members(states, members: np.ndarray, ran):
     return jax.tree.map(put, states, ran)
 
 
+def trial_records(log: rollout.TrialBuffer, members: np.ndarray, chunk: int) -> dict[str, np.ndarray]:
+    """The per-trial log of a chunk as columns (`run_dir.trial_columns`): learner by learner, trials in order."""
+    log = jax.device_get(log)
+    counts = np.asarray(log.count)
+    keep = np.arange(log.trial.shape[1])[None, :] < counts[:, None]
+    rows = np.asarray(log.rows)[keep]
+    columns = {name: rows[:, k] for k, name in enumerate(trial_log.COLUMNS)}
+    return {
+        "learner": np.repeat(members, counts),
+        "trial": np.asarray(log.trial)[keep],
+        "chunk": np.full(int(counts.sum()), chunk),
+        **columns,
+    }
+
+
 def default_run_dir(train: TrainConfig) -> Path:
-    """runs/<name>, where the name gives the conditions, trials, seeds and master seed."""
-    return Path("runs") / f"{'-'.join(train.conditions)}_{train.trials}x{train.seeds}_seed{train.seed}"
+    """runs/<name>, where the name gives the conditions and protocols, trials, seeds and master seed."""
+    return Path("runs") / f"{'-'.join(batch.learner_names(train))}_{train.trials}x{train.seeds}_seed{train.seed}"
 
 
 def run(
@@ -166,10 +182,14 @@ def run(
         group, chunk = run_dir_io.load_batch(run_dir, cfg)
         if writer:
             run_dir_io.truncate_metrics(run_dir, chunk)
+            run_dir_io.truncate_trials(run_dir, chunk)
     else:
         if writer and run_dir_io.holds_run(run_dir):
             raise FileExistsError(f"{run_dir} already holds a run; resume it instead")
         group, chunk = batch.init_batch(cfg), 0
+        if cfg.train.init_from:
+            source = run_dir_io.load_networks(cfg)
+            group = group._replace(states=batch.start_from(group.states, *source, cfg))
         if writer:
             run_dir_io.create(run_dir, cfg)
             run_dir_io.write_checkpoint(run_dir, chunk, group, cfg)
@@ -189,12 +209,12 @@ def run(
         def pick(a):
             return np.asarray(a)[members]
 
-        conds, hypers = group.conds, group.hypers
+        plans, hypers = group.plans, group.hypers
         if len(members) < len(table):
-            conds, hypers = jax.tree.map(pick, conds), jax.tree.map(pick, hypers)
+            plans, hypers = jax.tree.map(pick, plans), jax.tree.map(pick, hypers)
         if device_states is None:
             device_states = jax.tree.map(pick, states)
-        return run_chunk(device_states, conds, hypers, budget)
+        return run_chunk(device_states, plans, hypers, budget)
 
     states = jax.device_get(group.states)
     members = chunk_members(np.asarray(states.trials), cfg.train.trials)
@@ -204,8 +224,9 @@ def run(
     while running is not None:
         # The chunk's learners on this process (an all-gather across hosts with --multihost), copied to the host,
         # put back among the rest; learners outside the chunk ended no trial in it.
-        finished, running = running, None
+        (finished, log), running = running, None
         states = merge_members(states, members, jax.device_get(distribute.to_host(finished)))
+        records = None if log is None else trial_records(distribute.to_host(log), members, chunk + 1)
         ran = len(members)
         chunk += 1
         ok = np.asarray(finite_learners(states))
@@ -228,6 +249,8 @@ def run(
         rows = metrics_rows(states, table, chunk, time.monotonic() - started, cfg)
         if writer:  # one writer when several processes share the run directory
             run_dir_io.append_metrics(run_dir, rows)
+            if records is not None:
+                run_dir_io.append_trials(run_dir, records)
             run_dir_io.write_checkpoint(run_dir, chunk, group, cfg)
         if bar:
             left = eta.update(states.trials, states.steps, time.monotonic(), ran)

@@ -385,7 +385,9 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
 
 def test_python_api_evaluates_into_a_chosen_folder_and_loads_the_trained_parameters(tiny_run, tmp_path):
     results = evaluate.evaluate(tiny_run, out=tmp_path / "api")
-    assert set(results) == set(evaluate.RESULT_FILES)
+    assert set(results) == {*evaluate.RESULT_FILES, "adaptation"}
+    assert results["adaptation"] is None  # no protocol, no per-trial log
+    assert not (tmp_path / "api" / "adaptation.json").exists()
     for name in evaluate.RESULT_FILES:
         assert json.loads((tmp_path / "api" / f"{name}.json").read_text()) == json.loads(json.dumps(results[name]))
     params, learners = run_dir_io.load_params(tiny_run)

@@ -16,8 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, encoding, fields, learner, network, reference, rollout, sensor, task
-from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition
+from reach_jax import arm, encoding, fields, learner, network, protocol, reference, rollout, sensor, task
+from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_dict
 
 CFG = Config()
 N_SAMPLES = 8  # random draws per comparison: enough to hit every branch, few enough to stay fast
@@ -475,33 +475,51 @@ def test_trial_placement_and_drift_match_oracle():
 ROLLOUT_STEPS = 200
 # A 1.2 s cap (60 steps) so that trials end at the cap, at the goal and at a limit within 200 steps, and the
 # target drifts (after 1 s) in the capped trials. Seeds 2 and 3 together exercise all three ways to end a trial.
-ROLLOUT_CFG = dataclasses.replace(CFG, task=dataclasses.replace(TaskConfig(), max_trial_time=1.2))
+# The protocol switches blocks, turns learning off for a block and draws catch trials in two of them; the "mixed"
+# condition has the viscous field and a random per-trial force at once, with every input kept (the spring and
+# constant terms are checked step by step in test_dsdt_and_rk4_match_oracle; with them no trial reaches the goal).
+ROLLOUT_CFG = from_dict(
+    {
+        "version": 1,
+        "task": {"max_trial_time": 1.2},
+        "conditions": {"mixed": {"viscous": [list(r) for r in VISCOUS], "random": [8.0, 8.0]}},
+        "protocols": {
+            "replay": [
+                {"trials": 2, "condition": "mixed"},
+                {"trials": 2, "condition": "none", "learning": False, "catch": 0.5, "catch_condition": "mixed"},
+                {"trials": 96, "condition": "mixed", "catch": 0.4, "catch_condition": "none"},
+            ]
+        },
+        "train": {"trials": 100, "conditions": [], "protocols": ["replay"]},
+    }
+)
 ROLLOUT_SEEDS = (2, 3)
 
 
 def test_rollout_replays_in_oracle():
     cfg = ROLLOUT_CFG
-    # The viscous field and a random per-trial force at once, with every input kept (the spring and constant
-    # terms are checked step by step in test_dsdt_and_rk4_match_oracle; with them no trial here reaches the goal).
-    spec = ConditionConfig(viscous=VISCOUS, random=(8.0, 8.0))
-    cond = task.Condition(field=fields.make_field(spec), input_mask=encoding.input_mask(True, cfg))
-    ref_cond = reference.Condition(spec, reference.input_mask(True, cfg))
+    plan = protocol.make_plan("replay", cfg)
+    ref_plan = reference.make_plan("replay", cfg)
     hyper = rollout.default_hyper(cfg)
     trace = rollout.make_trace(cfg, ROLLOUT_STEPS)  # compiled once, run for each seed
-    seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0}
+    seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0, "catch": 0, "frozen": 0}
     for seed in ROLLOUT_SEEDS:
-        state = rollout.init_learner(jax.random.PRNGKey(seed), cond, cfg)
+        state = rollout.init_learner(jax.random.PRNGKey(seed), plan, cfg)
         state = state.replace(params=_float64_params(state.params))
-        final, infos = trace(state, cond, hyper)
+        final, infos = trace(state, plan, hyper)
         infos = jax.tree.map(np.asarray, infos)
 
-        lrn = reference.learner_from_jax(state)
+        lrn = reference.learner_from_jax(state, ref_plan[0].cond)  # the first block has no catch trials
         recs = []
         for i in range(ROLLOUT_STEPS):
-            draws = reference.Draws(infos.draws.start[i], infos.draws.target[i], infos.draws.force[i])
-            was_drifted = lrn.drifted
-            lrn, rec = reference.learner_step(lrn, ref_cond, cfg.learner.lr, cfg.learner.lam, infos.rnd[i], draws, cfg)
+            draws = reference.Draws(*(a[i] for a in infos.draws))
+            was_drifted, trials = lrn.drifted, lrn.trials
+            lrn, rec = reference.learner_step(lrn, ref_plan, cfg.learner.lr, cfg.learner.lam, infos.rnd[i], draws, cfg)
             seen["drift"] += (not was_drifted) and lrn.drifted
+            if lrn.trials > trials:
+                block = next(b for b in ref_plan if lrn.trials < b.end)
+                seen["catch"] += lrn.cond is block.catch_cond and block.catch > 0
+                seen["frozen"] += not lrn.learning
             recs.append(rec)
 
         # Trial outcomes are discrete: they must agree exactly, step by step.

@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 from reach_jax import checkpoint, cli, rollout, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.cli import error_line
-from reach_jax.config import ConditionConfig, Config, TrainConfig, from_dict, to_dict
+from reach_jax.config import BlockConfig, ConditionConfig, Config, TrainConfig, from_dict, to_dict
 from reach_jax.errors import printable
 
 ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
@@ -219,11 +219,11 @@ class _Injected:
         self.real, self.calls = real, 0
 
     def __call__(self, states, *args):
-        states = self.real(states, *args)
+        states, log = self.real(states, *args)
         self.calls += 1
         if self.calls == 3:
             states = states.replace(params=jax.tree.map(lambda x: x.at[1].set(jnp.nan), states.params))
-        return states
+        return states, log
 
 
 def test_non_finite_learner_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsys):
@@ -326,7 +326,9 @@ JSONISH = st.recursive(
     ),
     max_leaves=12,
 )
-SECTIONS = {f.name: f.default_factory() for f in dataclasses.fields(Config) if f.name != "conditions"}
+SECTIONS = {
+    f.name: f.default_factory() for f in dataclasses.fields(Config) if f.name not in ("conditions", "protocols")
+}
 
 
 @settings(max_examples=300, deadline=None)
@@ -365,6 +367,24 @@ def test_fuzzed_conditions_parse_or_fail_with_one_line(name, field, value):
         assert printable(field) in str(exc) or printable(name) in str(exc)
     else:
         assert name in [c.name for c in cfg.conditions]
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    name=st.one_of(st.sampled_from(["adaptation", "none", "mine"]), st.text(max_size=6)),
+    field=st.one_of(st.text(max_size=8), st.sampled_from([f.name for f in dataclasses.fields(BlockConfig)])),
+    value=JSONISH,
+)
+def test_fuzzed_protocols_parse_or_fail_with_one_line(name, field, value):
+    data = json.loads(json.dumps(to_dict(Config())))
+    data["protocols"][name] = [{"trials": 10, "condition": "viscous"}, {field: value}]
+    try:
+        cfg = from_dict(data)
+    except ValueError as exc:
+        assert str(exc) and "\n" not in str(exc)
+        assert printable(field) in str(exc) or printable(name) in str(exc)
+    else:
+        assert name in [p.name for p in cfg.protocols]
 
 
 @settings(max_examples=300, deadline=None)

@@ -41,8 +41,8 @@ def test_sharded_chunk_equals_unsharded():
         fresh = lambda: jax.tree.map(jnp.copy, group.states)
         one = rollout.make_chunk(cfg, 300, devices=jax.devices()[:1])
         many = rollout.make_chunk(cfg, 300)
-        a = one(one(fresh(), group.conds, group.hypers, budget), group.conds, group.hypers, budget)
-        b = many(many(fresh(), group.conds, group.hypers, budget), group.conds, group.hypers, budget)
+        a = one(one(fresh(), group.plans, group.hypers, budget)[0], group.plans, group.hypers, budget)[0]
+        b = many(many(fresh(), group.plans, group.hypers, budget)[0], group.plans, group.hypers, budget)[0]
         assert len(a.arm.sharding.device_set) == 1
         assert len(b.arm.sharding.device_set) == {N_DEVICES}
         for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, batch, cli, encoding, fields, learner, network, rollout, sensor, task, train
+from reach_jax import arm, batch, cli, encoding, fields, learner, network, protocol, rollout, sensor, task, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import (
     CONDITIONS,
@@ -130,8 +130,8 @@ def test_trials_end_and_reset_inside_the_scan():
     n_now, n_past = n_inputs(cfg) - n_past_inputs(cfg), n_past_inputs(cfg)
     joints = n_past - 2 * cfg.encoding.tau_units
     for name in ("none", "random_nopast"):
-        cond = task.make_condition(name, cfg)
-        final, info = trace(rollout.init_learner(jax.random.PRNGKey(0), cond, cfg), cond, rollout.default_hyper(cfg))
+        plan = protocol.make_plan(name, cfg)
+        final, info = trace(rollout.init_learner(jax.random.PRNGKey(0), plan, cfg), plan, rollout.default_hyper(cfg))
         done = np.asarray(info.goal | info.out_of_range | info.cap)
         assert done.sum() >= 5
         assert int(final.trials) == done.sum() == int(final.stats.trials)
@@ -151,7 +151,7 @@ def test_trials_end_and_reset_inside_the_scan():
 def test_draws_do_not_depend_on_how_steps_are_split():
     # 150 steps = two RNG blocks and a remainder; 70 + 80 splits the blocks elsewhere.
     cfg = tiny()
-    cond = task.make_condition("random", cfg)
+    cond = protocol.make_plan("random", cfg)
     state = rollout.init_learner(jax.random.PRNGKey(3), cond, cfg)
     hyper = rollout.default_hyper(cfg)
     whole, info = rollout.make_trace(cfg, 150)(state, cond, hyper)
@@ -180,7 +180,7 @@ def test_exploration_anneals_once_the_curriculum_is_full():
     # In a rollout, full_at records the trial count when the distance first reaches its maximum, once.
     cfg = tiny()
     _, hi = task.curriculum_bounds(cfg)
-    cond, hyper = task.make_condition("none", cfg), rollout.default_hyper(cfg)
+    cond, hyper = protocol.make_plan("none", cfg), rollout.default_hyper(cfg)
     start = rollout.init_learner(jax.random.PRNGKey(0), cond, cfg)
     assert int(start.full_at) == -1
     one, many = rollout.make_trace(cfg, 1), rollout.make_trace(cfg, 300)
@@ -206,9 +206,10 @@ def test_frozen_after_budget():
     cfg = tiny(trials=1)
     group = batch.init_batch(cfg)
     chunk = rollout.make_chunk(cfg, 400)
-    states = chunk(group.states, group.conds, group.hypers, jnp.array(1))
+    states, log = chunk(group.states, group.plans, group.hypers, jnp.array(1))
+    assert log is None  # no per-trial log unless train.trial_log_every asks
     assert int(states.trials[0]) == 1
-    again = chunk(jax.tree.map(jnp.copy, states), group.conds, group.hypers, jnp.array(1))
+    again, _ = chunk(jax.tree.map(jnp.copy, states), group.plans, group.hypers, jnp.array(1))
     chex.assert_trees_all_equal(again.params, states.params)
     assert int(again.steps[0]) == int(states.steps[0])
 
@@ -217,9 +218,9 @@ def test_batched_chunk_matches_pure_single_learner_train():
     cfg = tiny(conditions=("none", "viscous", "random", "random_nopast"), seeds=2)
     n_steps = 60
     group = batch.init_batch(cfg)
-    chunked = rollout.make_chunk(cfg, n_steps)(group.states, group.conds, group.hypers, jnp.array(10**6))
+    chunked, _ = rollout.make_chunk(cfg, n_steps)(group.states, group.plans, group.hypers, jnp.array(10**6))
     keys = jnp.stack([batch.learner_key(cfg.train.seed, s) for _, s in batch.learner_table(cfg.train)])
-    pure = jax.jit(jax.vmap(train.make_train(cfg, n_steps)))(keys, group.conds, group.hypers)
+    pure = jax.jit(jax.vmap(train.make_train(cfg, n_steps)))(keys, group.plans, group.hypers)
     # Same learner, same draws: batching may only reorder float32 sums.
     chex.assert_trees_all_close(pure.params, chunked.params, rtol=1e-4, atol=1e-6)
     np.testing.assert_array_equal(np.asarray(pure.trials), np.asarray(chunked.trials))
@@ -248,7 +249,7 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
 
         return jax.lax.scan(body, state, rollout.step_uniforms(state.key, state.steps, 2000, cfg))[0]
 
-    cond, hyper = (jax.tree.map(lambda a: a[0], t) for t in (group.conds, group.hypers))
+    cond, hyper = (jax.tree.map(lambda a: a[0], t) for t in (group.plans, group.hypers))
     learned = learn(wide, cond, hyper)
     assert int(learned.trials) > 5
     (w1, b1), (w2, _), _ = network.dense_layers(learned.params)
@@ -263,8 +264,8 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
     ]
     runs = [
         rollout.make_chunk(cfg, 700, speed=speed)(
-            jax.tree.map(jnp.copy, group.states), group.conds, group.hypers, budget
-        )
+            jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, budget
+        )[0]
         for speed in [*speeds, rollout.Speed(sparse_layer1=False)]
     ]
     assert network.dense_layers(runs[0].params)[0][0].shape == (2, n_inputs(cfg), 30)

@@ -1,0 +1,84 @@
+"""Per-trial movement measures that adaptation studies plot, gathered inside the compiled step (model §12).
+
+Units: positions and errors [m], angles [rad], speeds [m/s], durations [s]. A trial's aim is the line from the
+hand's start to the target as placed (before any drift). Errors are signed: positive to the left of the aim.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from reach_jax import arm
+from reach_jax.config import Config
+
+# Columns of a trial record, in order; the shell adds learner, trial and chunk (`run_dir.append_trials`).
+COLUMNS = (
+    "block",  # protocol block the trial ran in
+    "catch",  # 1 for a catch trial
+    "outcome",  # 0 goal, 1 out (joint limit), 2 cap
+    "duration_s",  # trial length [s]
+    "perp_error_m",  # hand's signed distance from the aim at peak hand speed [m]
+    "direction_error_rad",  # signed angle from the aim to the hand's displacement at train.direction_time [rad]
+    "aim_rad",  # direction of the aim in the shoulder frame [rad]
+    "distance_m",  # start-target distance [m]
+    "peak_speed",  # peak hand speed [m/s]
+)
+
+
+@struct.dataclass
+class TrialTrace:
+    """What a running trial has shown so far."""
+
+    start: jax.Array  # (2,) hand position at the trial's start [m]
+    aim: jax.Array  # (2,) unit vector from start to target
+    distance: jax.Array  # () start-target distance [m]
+    peak_speed: jax.Array  # () highest hand speed so far [m/s]
+    perp: jax.Array  # () signed distance from the aim when the speed peaked [m]
+    direction: jax.Array  # () signed direction error at train.direction_time [rad]; 0 before
+
+
+def _cross(a: jax.Array, b: jax.Array) -> jax.Array:
+    return a[0] * b[1] - a[1] * b[0]
+
+
+def start_trace(start_state: jax.Array, target: jax.Array, cfg: Config) -> TrialTrace:
+    """Trace of a trial that starts at arm state `start_state` (4,) toward `target` (2,) [m]."""
+    hand = arm.hand_position(start_state[:2], cfg.arm)
+    gap = target - hand
+    distance = jnp.linalg.norm(gap)
+    zero = jnp.zeros((), hand.dtype)
+    return TrialTrace(hand, gap / jnp.maximum(distance, 1e-12), distance, zero, zero, zero)
+
+
+def advance(trace: TrialTrace, state: jax.Array, t: jax.Array, cfg: Config) -> TrialTrace:
+    """Trace after the step that left the arm in `state` (4,), the trial's t-th step."""
+    hand = arm.hand_position(state[:2], cfg.arm)
+    speed = jnp.linalg.norm(arm.hand_velocity(state, cfg.arm))
+    moved = hand - trace.start
+    faster = speed > trace.peak_speed
+    at_direction = t == max(round(cfg.train.direction_time / cfg.arm.dt), 1)
+    direction = jnp.arctan2(_cross(trace.aim, moved), jnp.dot(trace.aim, moved))
+    return trace.replace(
+        peak_speed=jnp.where(faster, speed, trace.peak_speed),
+        perp=jnp.where(faster, _cross(trace.aim, moved), trace.perp),
+        direction=jnp.where(at_direction, direction, trace.direction),
+    )
+
+
+def record(trace: TrialTrace, block, catch, goal, out, t, cfg: Config) -> jax.Array:
+    """(len(COLUMNS),) float32 record of a trial that ended after t steps."""
+    outcome = jnp.where(goal, 0, jnp.where(out, 1, 2))
+    values = (
+        block,
+        catch,
+        outcome,
+        t * cfg.arm.dt,
+        trace.perp,
+        trace.direction,
+        jnp.arctan2(trace.aim[1], trace.aim[0]),
+        trace.distance,
+        trace.peak_speed,
+    )
+    return jnp.stack([jnp.asarray(v, jnp.float32) for v in values])
