@@ -104,7 +104,7 @@ def time_chunk(
         t0 = time.perf_counter()
         states = jax.block_until_ready(chunk(states, learners.plans, learners.hypers, budget)[0])
         times.append(time.perf_counter() - t0)
-    used = len(states.arm.sharding.device_set)
+    used = len(states.env.arm.sharding.device_set)
     return {
         "steps_per_s": n_learners * n_steps / statistics.median(times),
         "compile_s": compile_s,

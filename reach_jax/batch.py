@@ -119,8 +119,9 @@ def start_from(states: rollout.LearnerState, source, source_table: list[tuple[st
     picks = source_indices(source_table, cfg)
     taken = jax.tree.map(lambda a: jnp.asarray(a)[jnp.asarray(picks)], source)
     return states.replace(
-        params=jax.tree.map(jnp.copy, taken.params),
-        n_max=taken.n_max,
-        distance=taken.distance,
-        full_at=jnp.where(taken.full_at >= 0, 0, -1).astype(jnp.int32),
+        agent=states.agent.replace(params=jax.tree.map(jnp.copy, taken.agent.params), n_max=taken.agent.n_max),
+        curriculum=rollout.Curriculum(
+            distance=taken.curriculum.distance,
+            full_at=jnp.where(taken.curriculum.full_at >= 0, 0, -1).astype(jnp.int32),
+        ),
     )

@@ -105,11 +105,14 @@ def list_checkpoints(run_dir: Path) -> list[Path]:
     return sorted(folder.glob("chunk_*.npz"))
 
 
-def load(path: Path, template, defaults: dict[str, np.ndarray] | None = None) -> tuple[object, dict]:
+def load(
+    path: Path, template, defaults: dict[str, np.ndarray] | None = None, aliases: dict[str, str] | None = None
+) -> tuple[object, dict]:
     """Read a checkpoint into the structure of `template`; raises CheckpointError naming what is wrong.
 
-    `defaults`, leaves keyed like `flatten(template)`, fills those that the file lacks (fields added to the
-    state since it was written); any other missing leaf is an error.
+    A leaf the file lacks is read under its name in `aliases` (where older files kept it), else taken from
+    `defaults`, leaves keyed like `flatten(template)` (fields added to the state since the file was written);
+    any other missing leaf is an error.
     """
     path = Path(path)
     try:
@@ -132,6 +135,9 @@ def load(path: Path, template, defaults: dict[str, np.ndarray] | None = None) ->
     restored = []
     for key_path, leaf in leaves:
         name = jax.tree_util.keystr(key_path)
+        old = (aliases or {}).get(name)
+        if name not in arrays and old in arrays:
+            arrays[name] = arrays[old]
         if name not in arrays and name in fallback:
             arrays[name] = fallback[name]
         if name not in arrays:

@@ -17,7 +17,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from reach_jax import arm, network, task
+from reach_jax import arm, env, network, task
 from reach_jax.config import Config
 from reach_jax.fields import Field
 
@@ -92,29 +92,29 @@ def run_episode(policy, params, mask: jax.Array, field: Field, start: jax.Array,
       (Episode, Trajectory).
     """
     tau_max = jnp.asarray(cfg.arm.tau_max)
-    no_force = jnp.zeros(2)
     s0 = jnp.concatenate([arm.inverse_kinematics(start, cfg.arm), jnp.zeros(2)])
+    cond = task.Condition(field=field, input_mask=mask)
+    first = env.reset(s0, target, jnp.zeros(2), cond)
 
     def body(carry, t):
-        state, prev, prev_tau, done, outcome, steps = carry
-        obs = observation(state, prev, prev_tau, target, start, t, mask, cfg)
+        trial, done, outcome, steps = carry
+        # The condition is the same at every step: taken from outside the loop, not from its carry, so that the
+        # compiled loop reads the field as an invariant (carried, it rounds differently in float32).
+        trial = trial.replace(cond=cond)
+        obs = observation(trial.arm, trial.prev_arm, trial.prev_tau, target, start, t, mask, cfg)
         tau = jnp.clip(policy(params, obs), -tau_max, tau_max)
-        moved = arm.step(state, tau, field, no_force, cfg.arm)
-        hand = arm.hand_position(moved[:2], cfg.arm)
-        vel = arm.hand_velocity(moved, cfg.arm)
-        out = arm.is_out(moved, cfg.arm)
-        goal = task.goal_reached(hand, vel, target, cfg) & ~out
-        ended = (out | goal) & ~done
-        outcome = jnp.where(ended, jnp.where(out, OUT, SUCCESS), outcome)
+        moved, result = env.step(trial, tau, cfg, drift=False)
+        ended = (result.out_of_range | result.goal) & ~done
+        outcome = jnp.where(ended, jnp.where(result.out_of_range, OUT, SUCCESS), outcome)
         steps = jnp.where(ended, t + 1, steps)
         # An ended episode is frozen, so its path and speed stay at their final values.
-        keep = lambda a, b: jnp.where(done, a, b)  # noqa: E731
-        new = (keep(state, moved), keep(prev, state), keep(prev_tau, tau), done | out | goal, outcome, steps)
-        return new, (new[0], new[2])
+        trial = jax.tree.map(lambda a, b: jnp.where(done, a, b), trial, moved)
+        new = (trial, done | result.out_of_range | result.goal, outcome, steps)
+        return new, (trial.arm, trial.prev_tau)
 
     total = n_steps(cfg)
-    init = (s0, s0, jnp.zeros(2), jnp.array(False), jnp.array(FAIL, jnp.int32), jnp.array(total, jnp.int32))
-    (_, _, _, _, outcome, steps), (states, applied) = jax.lax.scan(body, init, jnp.arange(total, dtype=jnp.int32))
+    init = (first, jnp.array(False), jnp.array(FAIL, jnp.int32), jnp.array(total, jnp.int32))
+    (_, _, outcome, steps), (states, applied) = jax.lax.scan(body, init, jnp.arange(total, dtype=jnp.int32))
     states = jnp.concatenate([s0[None], states])
     hand = jax.vmap(lambda s: arm.hand_position(s[:2], cfg.arm))(states)
     speed = jax.vmap(lambda s: jnp.linalg.norm(arm.hand_velocity(s, cfg.arm)))(states)

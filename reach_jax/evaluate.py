@@ -557,7 +557,7 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
     level = cfg.claims.level
     starts, targets = test_pairs(cfg)
     c_starts, c_targets, c_corner = corner_pairs(cfg)
-    params, masks = data.batch.states.params, data.batch.conds.input_mask
+    params, masks = data.batch.states.agent.params, data.batch.conds.input_mask
     policy = network_policy(cfg)
     ep, traj = jax.device_get(
         run_episodes(
@@ -633,7 +633,7 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
                 "curriculum": claims.curriculum_stability(data.metrics, nets, cfg.train.trials, cfg),
             }
         )
-    trials = np.asarray(data.batch.states.trials)
+    trials = np.asarray(data.batch.states.counters.trials)
     return {
         "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
         "table2": {**table, "chunk": data.chunk, "trials_per_network": [int(t) for t in trials]},

@@ -60,6 +60,15 @@ def stack_plans(names, cfg: Config) -> Plan:
     return jax.tree.map(lambda *xs: jnp.stack(xs), *plans)
 
 
+@struct.dataclass
+class BlockState:
+    """A trial's place in its learner's protocol."""
+
+    index: jax.Array  # () int32 the block the trial runs in
+    learning: jax.Array  # () bool: the block updates the weights
+    catch: jax.Array  # () bool: the trial is a catch trial
+
+
 def block_index(plan: Plan, trial: jax.Array) -> jax.Array:
     """() int32 block that trial index `trial` (0-based, counted over the learner's life) belongs to."""
     return jnp.minimum(jnp.sum(trial >= plan.ends), plan.ends.shape[0] - 1).astype(jnp.int32)
@@ -74,10 +83,10 @@ def trial_condition(plan: Plan, trial: jax.Array, catch_draw: jax.Array):
       catch_draw: () uniform draw in [0, 1) of the trial (`task.TrialDraws.catch`).
 
     Returns:
-      (task.Condition, () bool learning, () int32 block, () bool catch trial).
+      (task.Condition, BlockState).
     """
     block = block_index(plan, trial)
     catch = catch_draw < plan.catch[block]
     index = jnp.where(catch, plan.catch_cond[block], plan.cond[block])
     cond = jax.tree.map(lambda a: a[index], plan.conds)
-    return cond, plan.learning[block], block, catch
+    return cond, BlockState(index=block, learning=plan.learning[block], catch=catch)

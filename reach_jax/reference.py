@@ -691,17 +691,18 @@ class StepRecord(NamedTuple):
 def learner_from_jax(state, cond: Condition) -> Learner:
     """Copy of a `reach_jax.rollout.LearnerState` (one learner) whose trial runs in `cond`.
 
-    Args: state with (4,) arm, (2,) target etc.; cond the oracle's copy of state.cond.
+    Args: state with its trial's (4,) arm, (2,) target etc.; cond the oracle's copy of state.env.cond.
     Returns: a Learner.
     """
-    pend = state.pending
+    agent, trial, counters = state.agent, state.env, state.counters
+    pend = agent.pending
     return Learner(
-        layers=layers_from_flax(state.params),
-        arm=np.array(state.arm, dtype=np.float64),
-        prev_arm=np.array(state.prev_arm, dtype=np.float64),
-        prev_tau=np.array(state.prev_tau, dtype=np.float64),
-        target=np.array(state.target, dtype=np.float64),
-        force=np.array(state.force, dtype=np.float64),
+        layers=layers_from_flax(agent.params),
+        arm=np.array(trial.arm, dtype=np.float64),
+        prev_arm=np.array(trial.prev_arm, dtype=np.float64),
+        prev_tau=np.array(trial.prev_tau, dtype=np.float64),
+        target=np.array(trial.target, dtype=np.float64),
+        force=np.array(trial.force, dtype=np.float64),
         pending=Pending(
             x=np.array(pend.x, dtype=np.float64),
             out=np.array(pend.out, dtype=np.float64),
@@ -710,16 +711,16 @@ def learner_from_jax(state, cond: Condition) -> Learner:
             terminal=bool(pend.terminal),
             reward=float(pend.reward),
         ),
-        t=int(state.t),
-        drifted=bool(state.drifted),
-        n_max=float(state.n_max),
-        distance=float(state.distance),
+        t=int(trial.t),
+        drifted=bool(trial.drifted),
+        n_max=float(agent.n_max),
+        distance=float(state.curriculum.distance),
         cond=cond,
-        learning=bool(state.learning),
-        pending_learning=bool(state.pending_learning),
-        was_full=bool(state.full_at >= 0),
-        trials=int(state.trials),
-        steps=int(state.steps),
+        learning=bool(state.block.learning),
+        pending_learning=bool(agent.pending_learning),
+        was_full=bool(state.curriculum.full_at >= 0),
+        trials=int(counters.trials),
+        steps=int(counters.steps),
     )
 
 

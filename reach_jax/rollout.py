@@ -19,7 +19,8 @@ import jax.numpy as jnp
 from flax import struct
 from jax.sharding import PartitionSpec
 
-from reach_jax import arm, distribute, encoding, learner, network, protocol, task, trial_log
+from reach_jax import distribute, encoding, learner, network, protocol, task, trial_log
+from reach_jax import env as env_lib
 from reach_jax.config import Config, n_inputs
 
 MAX_HIDDEN_PAD = 128  # largest Speed.hidden_pad: a TPU vector row of float32; wider only wastes memory
@@ -99,30 +100,42 @@ def zero_stats() -> Stats:
 
 
 @struct.dataclass
-class LearnerState:
-    """Everything one learner carries from step to step."""
+class AgentState:
+    """The network and what its learning carries from step to step."""
 
     params: dict  # network parameters
-    key: jax.Array  # PRNG key of the learner's per-step draws (`step_uniforms`); fixed for its life
-    arm: jax.Array  # (4,) arm state now
-    prev_arm: jax.Array  # (4,) arm state one step before (the start state at a trial's first step)
-    prev_tau: jax.Array  # (2,) torques one step before [N m] (0 at a trial's first step)
-    target: jax.Array  # (2,) target position [m]
-    force: jax.Array  # (2,) this trial's constant hand force [N]
-    cond: task.Condition  # this trial's condition (`protocol.trial_condition`)
-    learning: jax.Array  # () bool: this trial's block updates the weights
-    pending_learning: jax.Array  # () bool: the block of the pending step's trial updates the weights
-    block: jax.Array  # () int32 this trial's protocol block
-    catch: jax.Array  # () bool: this trial is a catch trial
     pending: learner.Pending  # the step awaiting its TS update
-    t: jax.Array  # () steps taken in this trial
-    drifted: jax.Array  # () bool: the target drifted in this trial
+    pending_learning: jax.Array  # () bool: the block of the pending step's trial updates the weights
     n_max: jax.Array  # () N_max of eq. 3 [steps]
+
+
+@struct.dataclass
+class Curriculum:
+    """The staircase of start-target distances (model §5)."""
+
     distance: jax.Array  # () curriculum distance [m]
     full_at: jax.Array  # () trials ended when the distance first reached its maximum; -1 before
+
+
+@struct.dataclass
+class Counters:
+    """How far the learner has come."""
+
     trials: jax.Array  # () trials ended since the start of training
     steps: jax.Array  # () steps taken since the start of training
     stats: Stats  # counters since the last chunk boundary
+
+
+@struct.dataclass
+class LearnerState:
+    """Everything one learner carries from step to step: agent, environment, protocol block, curriculum, counters."""
+
+    key: jax.Array  # PRNG key of the learner's per-step draws (`step_uniforms`); fixed for its life
+    agent: AgentState
+    env: env_lib.EnvState  # this trial
+    block: protocol.BlockState  # this trial's place in the learner's protocol
+    curriculum: Curriculum
+    counters: Counters
     trace: trial_log.TrialTrace | None = None  # this trial's movement so far; None without a per-trial log
 
 
@@ -148,32 +161,21 @@ def init_learner(key: jax.Array, plan: protocol.Plan, cfg: Config) -> LearnerSta
     k_param, k_trial, k_run = jax.random.split(key, 3)
     distance, full = (jnp.asarray(b) for b in task.curriculum_bounds(cfg))
     draws = task.draw_trial(k_trial, cfg)
-    cond, learning, block, catch = protocol.trial_condition(plan, jnp.array(0, jnp.int32), draws.catch)
+    cond, block = protocol.trial_condition(plan, jnp.array(0, jnp.int32), draws.catch)
     start, target, force = task.place_trial(draws, distance, cond.field, cfg)
+    rows = encoding.coded_support(start, start, jnp.zeros(2), cfg)
     return LearnerState(
-        params=network.init_params(k_param, cfg),
         key=k_run,
-        arm=start,
-        prev_arm=start,
-        prev_tau=jnp.zeros(2),
-        target=target,
-        force=force,
-        cond=cond,
-        learning=learning,
-        pending_learning=learning,
-        block=block,
-        catch=catch,
-        pending=learner.empty_pending(
-            n_inputs(cfg), cfg.network.hidden[0], encoding.coded_support(start, start, jnp.zeros(2), cfg)
+        agent=AgentState(
+            params=network.init_params(k_param, cfg),
+            pending=learner.empty_pending(n_inputs(cfg), cfg.network.hidden[0], rows),
+            pending_learning=block.learning,
+            n_max=jnp.asarray(cfg.learner.n_max_init),
         ),
-        t=jnp.array(0, jnp.int32),
-        drifted=jnp.array(False),
-        n_max=jnp.asarray(cfg.learner.n_max_init),
-        distance=distance,
-        full_at=jnp.where(distance >= full, 0, -1).astype(jnp.int32),
-        trials=jnp.array(0, jnp.int32),
-        steps=jnp.array(0, jnp.int32),
-        stats=zero_stats(),
+        env=env_lib.reset(start, target, force, cond),
+        block=block,
+        curriculum=Curriculum(distance=distance, full_at=jnp.where(distance >= full, 0, -1).astype(jnp.int32)),
+        counters=Counters(trials=jnp.array(0, jnp.int32), steps=jnp.array(0, jnp.int32), stats=zero_stats()),
         trace=trial_log.start_trace(start, target, cfg) if cfg.train.trial_log_every else None,
     )
 
@@ -228,26 +230,20 @@ def learner_step(
       active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
       speed: how the step is computed; only `sparse_layer1` changes the result, and only by float32 rounding.
     """
-    bound = exploration_bound(hyper, state.trials, state.full_at)
+    agent, trial, counters, cur = state.agent, state.env, state.counters, state.curriculum
+    bound = exploration_bound(hyper, counters.trials, cur.full_at)
     rnd, draws = split_uniforms(u, bound, cfg)
-    cond = state.cond
-    x = task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
-    rows = encoding.coded_support(state.arm, state.prev_arm, state.prev_tau, cfg)  # carried in the pending step
-    learns = state.pending_learning if active is None else active & state.pending_learning
+    x = env_lib.observe(trial, cfg)
+    rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)  # carried in the pending step
+    learns = agent.pending_learning if active is None else active & agent.pending_learning
     lr = jnp.where(learns, hyper.lr, 0.0)
     sparse = speed.sparse_layer1
-    pending_in = state.pending if sparse else state.pending._replace(rows=None)
-    params, out, loss, u1 = learner.ts_step(state.params, x, pending_in, state.n_max, lr, cfg, rows if sparse else None)
+    pending_in = agent.pending if sparse else agent.pending._replace(rows=None)
+    params, out, loss, u1 = learner.ts_step(agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None)
 
     tau = network.torque(out[1:], rnd, cfg)
-    moved = arm.step(state.arm, tau, cond.field, state.force, cfg.arm)
-    t = state.t + 1
-
-    hand = arm.hand_position(moved[:2], cfg.arm)
-    out_of_range = arm.is_out(moved, cfg.arm)
-    goal = task.goal_reached(hand, arm.hand_velocity(moved, cfg.arm), state.target, cfg) & ~out_of_range
-    cap_steps = round(cfg.task.max_trial_time / cfg.arm.dt)
-    cap = (t >= cap_steps) & ~goal & ~out_of_range
+    cont, outcome = env_lib.step(trial, tau, cfg)
+    goal, out_of_range, cap = outcome.goal, outcome.out_of_range, outcome.cap
     done = goal | out_of_range | cap
     lc = cfg.learner
     pending = learner.Pending(
@@ -261,72 +257,37 @@ def learner_step(
         rows=rows,
     )
 
-    # Continue the trial: the target drifts once the trial runs long.
-    target, moved_target = task.drift_target(state.target, hand, t, cfg)
-    cont = dict(
-        arm=moved,
-        prev_arm=state.arm,
-        prev_tau=tau,
-        target=target,
-        force=state.force,
-        cond=state.cond,
-        learning=state.learning,
-        block=state.block,
-        catch=state.catch,
-        t=t,
-        drifted=state.drifted | moved_target,
-    )
-
-    # Or start a new one, with the curriculum and N_max updated by the trial that ended.
-    n_max = jnp.where(goal, learner.update_n_max(state.n_max, t, hyper.lam), state.n_max)
-    was_full = state.full_at >= 0
-    distance = jnp.where(
-        done, task.update_curriculum(state.distance, goal, state.drifted, was_full, cfg), state.distance
-    )
+    # If the trial ended, a new one starts, with the curriculum and N_max updated by the one that ended.
+    n_max = jnp.where(goal, learner.update_n_max(agent.n_max, cont.t, hyper.lam), agent.n_max)
+    was_full = cur.full_at >= 0
+    distance = jnp.where(done, task.update_curriculum(cur.distance, goal, trial.drifted, was_full, cfg), cur.distance)
     first_full = ~was_full & (distance >= task.curriculum_bounds(cfg)[1])
-    full_at = jnp.where(first_full, state.trials + done, state.full_at)
-    new_cond, learning, block, catch = protocol.trial_condition(plan, state.trials + done, draws.catch)
+    full_at = jnp.where(first_full, counters.trials + done, cur.full_at)
+    new_cond, new_block = protocol.trial_condition(plan, counters.trials + done, draws.catch)
     start, new_target, force = task.place_trial(draws, distance, new_cond.field, cfg)
-    fresh = dict(
-        arm=start,
-        prev_arm=start,
-        prev_tau=jnp.zeros(2),
-        target=new_target,
-        force=force,
-        cond=new_cond,
-        learning=learning,
-        block=block,
-        catch=catch,
-        t=jnp.array(0, jnp.int32),
-        drifted=jnp.array(False),
-    )
+    fresh = {"env": env_lib.reset(start, new_target, force, new_cond), "block": new_block}
+    kept = {"env": cont, "block": state.block}
     record = None
     if state.trace is not None:
-        trace = trial_log.advance(state.trace, moved, t, cfg)
-        record = trial_log.record(trace, state.block, state.catch, goal, out_of_range, t, cfg)
-        cont["trace"] = trace
+        traced = trial_log.advance(state.trace, cont.arm, cont.t, cfg)
+        record = trial_log.record(traced, state.block.index, state.block.catch, goal, out_of_range, cont.t, cfg)
+        kept["trace"] = traced
         fresh["trace"] = trial_log.start_trace(start, new_target, cfg)
-    nxt = jax.tree.map(lambda a, b: jnp.where(done, a, b), fresh, cont)
+    nxt = jax.tree.map(lambda a, b: jnp.where(done, a, b), fresh, kept)
 
-    s = state.stats
+    s = counters.stats
     stats = Stats(
         trials=s.trials + done,
         goals=s.goals + goal,
         outs=s.outs + out_of_range,
         caps=s.caps + cap,
-        trial_steps=s.trial_steps + jnp.where(done, t, 0),
-        drifted=s.drifted + (done & state.drifted),
+        trial_steps=s.trial_steps + jnp.where(done, cont.t, 0),
+        drifted=s.drifted + (done & trial.drifted),
     )
     new = state.replace(
-        params=params,
-        pending=pending,
-        pending_learning=state.learning,
-        n_max=n_max,
-        distance=distance,
-        full_at=full_at,
-        trials=state.trials + done,
-        steps=state.steps + 1,
-        stats=stats,
+        agent=AgentState(params=params, pending=pending, pending_learning=state.block.learning, n_max=n_max),
+        curriculum=Curriculum(distance=distance, full_at=full_at),
+        counters=Counters(trials=counters.trials + done, steps=counters.steps + 1, stats=stats),
         **nxt,
     )
     info = StepInfo(
@@ -334,7 +295,7 @@ def learner_step(
         out=out,
         rnd=rnd,
         tau=tau,
-        arm=moved,
+        arm=cont.arm,
         draws=draws,
         goal=goal,
         out_of_range=out_of_range,
@@ -362,12 +323,17 @@ def budgeted_step(
       budget: () trials per learner.
       cfg: model config.
     """
-    active = state.trials < budget
+    active = state.counters.trials < budget
     new, info = learner_step(state, u, plan, hyper, cfg, active=active, speed=speed)
     # The weights of a frozen learner already stay put (zero step size), so the select skips the
     # largest arrays instead of copying them once more every step.
-    rest = jax.tree.map(lambda a, b: jnp.where(active, a, b), new.replace(params=None), state.replace(params=None))
-    return rest.replace(params=new.params), info._replace(ended=info.ended & active)
+    rest = jax.tree.map(lambda a, b: jnp.where(active, a, b), without_params(new), without_params(state))
+    return rest.replace(agent=rest.agent.replace(params=new.agent.params)), info._replace(ended=info.ended & active)
+
+
+def without_params(state: LearnerState) -> LearnerState:
+    """state with the network parameters left out (None)."""
+    return state.replace(agent=state.agent.replace(params=None))
 
 
 def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED, log=None):
@@ -392,8 +358,8 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
 
     def draws(s: LearnerState, n: int) -> jax.Array:
         if not batched:
-            return step_uniforms(s.key, s.steps, n, cfg)
-        u = jax.vmap(lambda k, first: step_uniforms(k, first, n, cfg))(s.key, s.steps)
+            return step_uniforms(s.key, s.counters.steps, n, cfg)
+        u = jax.vmap(lambda k, first: step_uniforms(k, first, n, cfg))(s.key, s.counters.steps)
         return jnp.swapaxes(u, 0, 1)
 
     def block_body(carry, _):
@@ -447,17 +413,20 @@ def widen_hidden(state: LearnerState, multiple: int) -> LearnerState:
     units than with 30 (benchmarks/levers.py), and `network.pad_hidden` keeps the added units inert.
     Works with or without a leading learner axis.
     """
-    params = network.pad_hidden(state.params, multiple)
-    u1 = state.pending.u1
+    agent = state.agent
+    params = network.pad_hidden(agent.params, multiple)
+    u1 = agent.pending.u1
     grow = network.dense_layers(params)[0][0].shape[-1] - u1.shape[-1]
     u1 = jnp.pad(u1, [(0, 0)] * (u1.ndim - 1) + [(0, grow)])
-    return state.replace(params=params, pending=state.pending._replace(u1=u1))
+    return state.replace(agent=agent.replace(params=params, pending=agent.pending._replace(u1=u1)))
 
 
 def narrow_hidden(state: LearnerState, cfg: Config) -> LearnerState:
     """Inverse of `widen_hidden`: the paper's layer widths again, exactly."""
-    u1 = state.pending.u1[..., : cfg.network.hidden[0]]
-    return state.replace(params=network.unpad_hidden(state.params, cfg), pending=state.pending._replace(u1=u1))
+    agent = state.agent
+    u1 = agent.pending.u1[..., : cfg.network.hidden[0]]
+    params = network.unpad_hidden(agent.params, cfg)
+    return state.replace(agent=agent.replace(params=params, pending=agent.pending._replace(u1=u1)))
 
 
 def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_SPEED):
@@ -479,15 +448,16 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_S
     batched = jax.vmap(lambda s, u, p, h, b: budgeted_step(s, u, p, h, b, cfg, speed), in_axes=(0, 0, 0, 0, None))
 
     def chunk(states, plans, hypers, budget):
-        states = states.replace(stats=jax.tree.map(jnp.zeros_like, states.stats))
-        n_learners = states.trials.shape[0]
+        counters = states.counters
+        states = states.replace(counters=counters.replace(stats=jax.tree.map(jnp.zeros_like, counters.stats)))
+        n_learners = counters.trials.shape[0]
         log = jax.vmap(lambda _: empty_buffer(cfg))(jnp.arange(n_learners)) if every else None
 
         def step_body(carry, u):
             s, buffers = carry
             new, info = batched(s, u, plans, hypers, budget)
             if buffers is not None:
-                buffers = jax.vmap(lambda b, i, n: log_trial(b, i, n, every))(buffers, info, s.trials)
+                buffers = jax.vmap(lambda b, i, n: log_trial(b, i, n, every))(buffers, info, s.counters.trials)
             return (new, buffers), None
 
         states, log, _ = scan_steps(step_body, states, n_steps, cfg, batched=True, speed=speed, log=log)

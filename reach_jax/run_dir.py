@@ -27,7 +27,23 @@ METRICS_FILE = "metrics.jsonl"
 TRIALS_DIR = "trials"  # the per-trial log: one little-endian binary file per column, appended chunk by chunk
 TRIAL_KEYS = {"learner": "<i4", "trial": "<i4", "chunk": "<i4"}  # columns the shell adds to trial_log.COLUMNS
 # LearnerState fields that checkpoints written before protocols lack (each is filled from a fresh batch).
-ADDED_STATE_FIELDS = ("cond", "learning", "pending_learning", "block", "catch")
+ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "block")
+# Checkpoints written before LearnerState was split stored its fields flat: the groups' names were not in the paths.
+STATE_GROUPS = ("agent", "env", "curriculum", "counters")
+RENAMED_STATE_FIELDS = {"block.index": "block", "block.learning": "learning", "block.catch": "catch"}
+
+
+def flat_state_name(name: str) -> str:
+    """Where a checkpoint written before LearnerState was split kept the leaf that is `name` now."""
+    prefix = "['states']."
+    if not name.startswith(prefix):
+        return name
+    rest = name.removeprefix(prefix)
+    for new, old in RENAMED_STATE_FIELDS.items():
+        if rest == new:
+            return prefix + old
+    group, _, field = rest.partition(".")
+    return prefix + field if group in STATE_GROUPS and field else name
 
 
 def read_config(run_dir: Path) -> Config:
@@ -177,12 +193,14 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[ba
     # Hyperparameters added since the checkpoint was written take their values from the config, and so do the
     # fields that say which condition and block a trial runs in: without a protocol they never change.
     added = tuple(f".{name}" for name in ADDED_STATE_FIELDS)
+    leaves = checkpoint.flatten(template)
     defaults = {
         name: leaf
-        for name, leaf in checkpoint.flatten(template).items()
+        for name, leaf in leaves.items()
         if name.startswith("['hypers']") or name.removeprefix("['states']").startswith(added)
     }
-    tree, meta = checkpoint.load(path, template, defaults)
+    aliases = {name: flat_state_name(name) for name in leaves}
+    tree, meta = checkpoint.load(path, template, defaults, aliases)
     try:
         # Through from_dict, so a field added to the config since the checkpoint reads as its default.
         stored = from_dict(meta["config"])
@@ -231,7 +249,7 @@ def load_params(run_dir: Path, path: Path | None = None) -> tuple[dict, list[tup
       learners[i] = (condition, seed index) of learner i.
     """
     run = load(run_dir, path)
-    return run.batch.states.params, run.learners
+    return run.batch.states.agent.params, run.learners
 
 
 MODEL_SECTIONS = ("arm", "sensor", "encoding", "network")  # what a network's weights mean

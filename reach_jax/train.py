@@ -40,18 +40,19 @@ def make_train(cfg: Config, n_steps: int):
 @jax.jit
 def finite_learners(states: rollout.LearnerState) -> jax.Array:
     """(L,) bool: every parameter and arm value of the learner is finite."""
-    leaves = jax.tree.leaves((states.params, states.arm, states.n_max))
+    leaves = jax.tree.leaves((states.agent.params, states.env.arm, states.agent.n_max))
     per_leaf = [jnp.all(jnp.isfinite(x.reshape(x.shape[0], -1)), axis=1) for x in leaves]
     return jnp.all(jnp.stack(per_leaf), axis=0)
 
 
 def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, cfg: Config) -> list[dict]:
     """One metrics record per learner for the chunk just run."""
-    s = jax.device_get(states.stats)
-    trials, steps = np.asarray(states.trials), np.asarray(states.steps)
-    distance, n_max, block = np.asarray(states.distance), np.asarray(states.n_max), np.asarray(states.block)
+    counters, cur = states.counters, states.curriculum
+    s = jax.device_get(counters.stats)
+    trials, steps = np.asarray(counters.trials), np.asarray(counters.steps)
+    distance, n_max, block = np.asarray(cur.distance), np.asarray(states.agent.n_max), np.asarray(states.block.index)
     hypers = batch.learner_hypers(cfg)
-    bound = np.asarray(rollout.exploration_bound(batch.hyper_columns(cfg), states.trials, states.full_at))
+    bound = np.asarray(rollout.exploration_bound(batch.hyper_columns(cfg), counters.trials, cur.full_at))
     rows = []
     for i, ((cond, seed), hyper) in enumerate(zip(table, hypers, strict=True)):
         ended = int(s.trials[i])
@@ -117,8 +118,9 @@ def chunk_members(trials: np.ndarray, budget: int) -> np.ndarray:
 def merge_members(states, members: np.ndarray, ran):
     """Host states of every learner after a chunk that ran only `members`: theirs from `ran`, the others as they
     were but with zeroed chunk counters."""
-    states = states.replace(stats=jax.tree.map(np.zeros_like, states.stats))
-    if len(members) == len(np.asarray(states.trials)):
+    counters = states.counters
+    states = states.replace(counters=counters.replace(stats=jax.tree.map(np.zeros_like, counters.stats)))
+    if len(members) == len(np.asarray(counters.trials)):
         return jax.tree.map(np.asarray, ran)
 
     def put(whole, part):
@@ -201,7 +203,7 @@ def run(
     started = time.monotonic()
 
     def unfinished(states) -> bool:
-        return int(np.min(np.asarray(states.trials))) < cfg.train.trials
+        return int(np.min(np.asarray(states.counters.trials))) < cfg.train.trials
 
     def dispatch(states, members, device_states=None):
         """Start the next chunk on the learners `members`; `device_states`, if given, already holds exactly them."""
@@ -217,7 +219,7 @@ def run(
         return run_chunk(device_states, plans, hypers, budget)
 
     states = jax.device_get(group.states)
-    members = chunk_members(np.asarray(states.trials), cfg.train.trials)
+    members = chunk_members(np.asarray(states.counters.trials), cfg.train.trials)
     running = None
     if unfinished(states):
         running = dispatch(states, members, group.states if len(members) == len(table) else None)
@@ -232,7 +234,7 @@ def run(
         ok = np.asarray(finite_learners(states))
         # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk.
         if ok.all() and unfinished(states):
-            following = chunk_members(np.asarray(states.trials), cfg.train.trials)
+            following = chunk_members(np.asarray(states.counters.trials), cfg.train.trials)
             # The devices already hold the learners of the next chunk unless the batch shrinks.
             reuse = finished if np.array_equal(following, members) else None
             members = following
@@ -253,8 +255,9 @@ def run(
                 run_dir_io.append_trials(run_dir, records)
             run_dir_io.write_checkpoint(run_dir, chunk, group, cfg)
         if bar:
-            left = eta.update(states.trials, states.steps, time.monotonic(), ran)
-            bar.update(int(np.minimum(np.asarray(states.trials), cfg.train.trials).sum()), status_line(rows), eta=left)
+            done = np.asarray(states.counters.trials)
+            left = eta.update(done, states.counters.steps, time.monotonic(), ran)
+            bar.update(int(np.minimum(done, cfg.train.trials).sum()), status_line(rows), eta=left)
     if bar:
         bar.update(total, "done", force=True)
         bar.close()

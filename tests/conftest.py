@@ -1,6 +1,38 @@
-"""Test-session setup: the CPU compiler options that the command lines set, before JAX starts."""
+"""Test-session setup: the CPU compiler options that the command lines set, before JAX starts; shared fixtures."""
 
-from reach_jax import distribute
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from reach_jax import checkpoint, distribute
+
+
+def _train_until_killed(argv: list[str], out: Path, chunk: int = 3) -> Path:
+    """Run `python -m reach_jax.train ARGV --out OUT --quiet` and SIGKILL it once checkpoint `chunk` is on disk."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "reach_jax.train", *argv, "--out", str(out), "--quiet"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and proc.poll() is None:
+        done = checkpoint.list_checkpoints(out)
+        if done and done[-1].name >= checkpoint.checkpoint_path(out, chunk).name:
+            proc.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.01)
+    assert proc.wait() == -signal.SIGKILL, "the run finished before it could be killed"
+    return checkpoint.list_checkpoints(out)[-1]
+
+
+@pytest.fixture
+def train_until_killed():
+    """train_until_killed(argv, out, chunk=3) -> the newest checkpoint of a training run killed after that chunk."""
+    return _train_until_killed
 
 
 def pytest_configure(config):

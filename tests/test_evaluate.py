@@ -393,7 +393,7 @@ def test_python_api_evaluates_into_a_chosen_folder_and_loads_the_trained_paramet
     params, learners = run_dir_io.load_params(tiny_run)
     assert learners == batch.learner_table(run_dir_io.read_config(tiny_run).train)
     newest, _ = run_dir_io.load_batch(tiny_run, run_dir_io.read_config(tiny_run))
-    chex.assert_trees_all_equal(params, newest.states.params)
+    chex.assert_trees_all_equal(params, newest.states.agent.params)
     assert all(leaf.shape[0] == len(learners) for leaf in jax.tree.leaves(params))
     # The loaded parameters drive the network as a plain function.
     one = jax.tree.map(lambda a: a[0], params)

@@ -21,7 +21,7 @@ def _near_successes(group, starts, targets) -> np.ndarray:
     ep, _ = jax.device_get(
         episodes.run_episodes(
             episodes.network_policy(CFG),
-            group.states.params,
+            group.states.agent.params,
             group.conds.input_mask,
             jax.tree.map(lambda a: a[:1], evaluate.test_fields(CFG)),
             starts,

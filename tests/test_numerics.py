@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, encoding, fields, learner, network, protocol, reference, rollout, sensor, task
+from reach_jax import arm, encoding, env, fields, learner, network, protocol, reference, rollout, sensor, task
 from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_dict
 
 CFG = Config()
@@ -98,6 +98,43 @@ def test_dsdt_and_rk4_match_oracle(case):
             [reference.dsdt(s, t, ConditionConfig(), np.zeros(2), CFG.arm) for s, t in zip(states, taus, strict=True)]
         )
         assert np.abs(plain - want_d).max() > 1e-3
+
+
+_ENV_STEP = jax.jit(lambda s, tau: env.step(s, tau, CFG))
+
+
+@pytest.mark.parametrize("case", sorted(FORCE_CASES))
+def test_environment_trial_matches_oracle(case):
+    """env.reset, observe and step through 80 steps under random torques: the same arm, input and outcomes."""
+    spec, force = FORCE_CASES[case]
+    rng = _rng(5)
+    cond = task.Condition(field=fields.make_field(spec), input_mask=encoding.input_mask(True, CFG))
+    start = np.concatenate([reference.inverse_kinematics(np.array([-0.09, 0.34]), CFG.arm), np.zeros(2)])
+    target = np.array([-0.01, 0.41])
+    trial = env.reset(jnp.asarray(start), jnp.asarray(target), jnp.asarray(force), cond)
+    state, prev, prev_tau, ref_target = start, start, np.zeros(2), target
+    mask = reference.input_mask(True, CFG)
+    seen_drift = False
+    for t in range(1, 81):
+        want_x = reference.observe(state, prev, prev_tau, ref_target, mask, CFG)
+        np.testing.assert_allclose(np.asarray(env.observe(trial, CFG)), want_x, rtol=0, atol=1e-9)
+        tau = rng.uniform(-0.5, 0.5, 2) * np.array(CFG.arm.tau_max)
+        trial, outcome = _ENV_STEP(trial, jnp.asarray(tau))
+        moved = reference.arm_step(state, tau, spec, force, CFG.arm)
+        hand = reference.hand_position(moved[:2], CFG.arm)
+        out = reference.is_out(moved, CFG.arm)
+        goal = (not out) and reference.goal_reached(hand, reference.hand_velocity(moved, CFG.arm), ref_target, CFG)
+        cap = not goal and not out and t >= round(CFG.task.max_trial_time / CFG.arm.dt)
+        new_target, drifted = reference.drift_target(ref_target, hand, t, CFG)
+        # States carry float64 rounding from step to step; 1e-9 leaves room for 80 steps, not for a model change.
+        np.testing.assert_allclose(np.asarray(trial.arm), moved, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(trial.target), new_target, rtol=0, atol=1e-9)
+        assert (bool(outcome.goal), bool(outcome.out_of_range), bool(outcome.cap)) == (goal, out, cap)
+        assert int(trial.t) == t and bool(trial.drifted) == (seen_drift or drifted)
+        seen_drift = seen_drift or drifted
+        if out:
+            break
+        state, prev, prev_tau, ref_target = moved, state, tau, new_target
 
 
 def test_kinematics_match_oracle():
@@ -505,7 +542,7 @@ def test_rollout_replays_in_oracle():
     seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0, "catch": 0, "frozen": 0}
     for seed in ROLLOUT_SEEDS:
         state = rollout.init_learner(jax.random.PRNGKey(seed), plan, cfg)
-        state = state.replace(params=_float64_params(state.params))
+        state = state.replace(agent=state.agent.replace(params=_float64_params(state.agent.params)))
         final, infos = trace(state, plan, hyper)
         infos = jax.tree.map(np.asarray, infos)
 
@@ -536,13 +573,14 @@ def test_rollout_replays_in_oracle():
         np.testing.assert_allclose(infos.out, np.array([r.out for r in recs]), rtol=0, atol=1e-9)
         np.testing.assert_allclose(infos.loss, np.array([r.loss for r in recs]), rtol=0, atol=1e-9)
         chex.assert_trees_all_close(
-            jax.tree.map(np.asarray, final.params), reference.layers_to_flax(lrn.layers), rtol=0, atol=1e-9
+            jax.tree.map(np.asarray, final.agent.params), reference.layers_to_flax(lrn.layers), rtol=0, atol=1e-9
         )
-        np.testing.assert_allclose(np.asarray(final.arm), lrn.arm, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(np.asarray(final.target), lrn.target, rtol=0, atol=1e-9)
-        assert float(final.n_max) == pytest.approx(lrn.n_max, abs=1e-9)
-        assert float(final.distance) == pytest.approx(lrn.distance, abs=1e-12)
-        assert int(final.trials) == lrn.trials and int(final.t) == lrn.t and bool(final.drifted) == lrn.drifted
+        trial = final.env
+        np.testing.assert_allclose(np.asarray(trial.arm), lrn.arm, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(trial.target), lrn.target, rtol=0, atol=1e-9)
+        assert float(final.agent.n_max) == pytest.approx(lrn.n_max, abs=1e-9)
+        assert float(final.curriculum.distance) == pytest.approx(lrn.distance, abs=1e-12)
+        assert int(final.counters.trials) == lrn.trials and int(trial.t) == lrn.t and bool(trial.drifted) == lrn.drifted
 
     # The reset path (and each way of ending a trial, and the drift) was exercised.
     assert all(v > 0 for v in seen.values()), seen

@@ -4,10 +4,6 @@ networks start from another run, the per-trial log, its adaptation analysis, and
 from __future__ import annotations
 
 import json
-import signal
-import subprocess
-import sys
-import time
 
 import chex
 import jax
@@ -53,12 +49,12 @@ def test_blocks_switch_on_their_trial():
     pick = jax.jit(lambda trial, draw: protocol.trial_condition(plan, trial, draw))
     viscous = np.asarray(condition(cfg, "viscous").viscous, np.float32)
     for trial, block, field, learning in ((0, 0, 0.0, True), (6, 0, 0.0, True), (7, 1, 1.0, True), (17, 1, 1.0, True)):
-        cond, learns, got, catch = pick(jnp.int32(trial), jnp.float32(0.5))
-        assert int(got) == block and bool(learns) == learning and not bool(catch)
+        cond, got = pick(jnp.int32(trial), jnp.float32(0.5))
+        assert int(got.index) == block and bool(got.learning) == learning and not bool(got.catch)
         np.testing.assert_array_equal(np.asarray(cond.field.viscous), field * viscous)
-    cond, learns, got, _ = pick(jnp.int32(18), jnp.float32(0.5))
-    assert int(got) == 2 and not bool(learns) and float(cond.field.random[0]) == 8.0
-    assert int(pick(jnp.int32(10**9), jnp.float32(0.5))[2]) == 2  # past the end: the last block goes on
+    cond, got = pick(jnp.int32(18), jnp.float32(0.5))
+    assert int(got.index) == 2 and not bool(got.learning) and float(cond.field.random[0]) == 8.0
+    assert int(pick(jnp.int32(10**9), jnp.float32(0.5))[1].index) == 2  # past the end: the last block goes on
 
     # In the compiled chunk every logged trial ran in the block its index falls in.
     group = batch.init_batch(cfg)
@@ -82,8 +78,8 @@ def test_a_frozen_block_keeps_the_weights_and_a_learning_one_changes_them():
         states, _ = rollout.make_chunk(cfg, 300)(
             jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, jnp.int32(1000)
         )
-        assert int(states.trials.min()) > 10
-        outs.append((group.states.params, states.params))
+        assert int(states.counters.trials.min()) > 10
+        outs.append((group.states.agent.params, states.agent.params))
     chex.assert_trees_all_equal(*outs[0])
     assert not all(np.array_equal(a, b) for a, b in zip(*(jax.tree.leaves(p) for p in outs[1]), strict=True))
 
@@ -92,10 +88,10 @@ def test_catch_trials_come_at_their_rate_in_the_catch_condition():
     rate = 0.25
     cfg = config([{"trials": 10**5, "condition": "viscous", "catch": rate, "catch_condition": "none"}], trials=10**5)
     plan = protocol.make_plan("p", cfg)
-    cond, _, _, catch = protocol.trial_condition(plan, jnp.int32(3), jnp.float32(0.2))
-    assert bool(catch) and not np.asarray(cond.field.viscous).any()
-    cond, _, _, catch = protocol.trial_condition(plan, jnp.int32(3), jnp.float32(0.3))
-    assert not bool(catch) and np.asarray(cond.field.viscous).any()
+    cond, block = protocol.trial_condition(plan, jnp.int32(3), jnp.float32(0.2))
+    assert bool(block.catch) and not np.asarray(cond.field.viscous).any()
+    cond, block = protocol.trial_condition(plan, jnp.int32(3), jnp.float32(0.3))
+    assert not bool(block.catch) and np.asarray(cond.field.viscous).any()
 
     group = batch.init_batch(cfg)
     _, log = rollout.make_chunk(cfg, 6000)(group.states, group.plans, group.hypers, jnp.int32(10**5))
@@ -126,26 +122,14 @@ def protocol_argv(tmp_path):
     ]
 
 
-def test_a_two_block_protocol_resumes_bit_identically_after_sigkill(tmp_path):
+def test_a_two_block_protocol_resumes_bit_identically_after_sigkill(tmp_path, train_until_killed):
     argv = protocol_argv(tmp_path)
     whole = tmp_path / "whole"
     assert cli.train_main([*argv, "--out", str(whole), "--quiet"]) == 0
     assert run_dir_io.read_config(whole).train.trials == 60  # the protocol's length
 
     out = tmp_path / "killed"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "reach_jax.train", *argv, "--out", str(out), "--quiet"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None:
-        done = checkpoint.list_checkpoints(out)
-        if done and done[-1].name >= checkpoint.checkpoint_path(out, 3).name:
-            proc.send_signal(signal.SIGKILL)
-            break
-        time.sleep(0.01)
-    assert proc.wait() == -signal.SIGKILL, "the run finished before it could be killed"
+    train_until_killed(argv, out)
     assert cli.train_main(["--resume", str(out), "--quiet"]) == 0
 
     final, want = (checkpoint.list_checkpoints(r)[-1] for r in (out, whole))
@@ -174,8 +158,8 @@ def test_networks_start_from_another_run_and_a_missing_one_is_a_one_line_error(t
     src, _ = run_dir_io.load_params(source)
     first = run_dir_io.load_batch(out, run_dir_io.read_config(out), checkpoint.checkpoint_path(out, 0))[0]
     # The one learner (seed 0) took the network of condition none, seed 0: learner 0 of the source.
-    chex.assert_trees_all_equal(first.states.params, jax.tree.map(lambda a: a[:1], src))
-    assert int(first.states.trials[0]) == 0
+    chex.assert_trees_all_equal(first.states.agent.params, jax.tree.map(lambda a: a[:1], src))
+    assert int(first.states.counters.trials[0]) == 0
     capsys.readouterr()
 
     for extra, needle in (

@@ -7,10 +7,6 @@ import errno
 import json
 import os
 import re
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import jax
@@ -76,22 +72,9 @@ def uninterrupted(tmp_path_factory) -> Path:
     return out
 
 
-def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path):
+def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path, train_until_killed):
     out = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "reach_jax.train", *ARGV, "--out", str(out), "--quiet"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None:
-        done = checkpoint.list_checkpoints(out)
-        if done and done[-1].name >= checkpoint.checkpoint_path(out, 3).name:
-            proc.send_signal(signal.SIGKILL)
-            break
-        time.sleep(0.01)
-    assert proc.wait() == -signal.SIGKILL, "the run finished before it could be killed"
-    killed_at = checkpoint.list_checkpoints(out)[-1]
+    killed_at = train_until_killed(ARGV, out)
     assert cli.train_main(["--resume", str(out), "--quiet"]) == 0
     name, arrays = final_arrays(out)
     want_name, want = final_arrays(uninterrupted)
@@ -222,7 +205,8 @@ class _Injected:
         states, log = self.real(states, *args)
         self.calls += 1
         if self.calls == 3:
-            states = states.replace(params=jax.tree.map(lambda x: x.at[1].set(jnp.nan), states.params))
+            params = jax.tree.map(lambda x: x.at[1].set(jnp.nan), states.agent.params)
+            states = states.replace(agent=states.agent.replace(params=params))
         return states, log
 
 
@@ -351,6 +335,16 @@ def test_fuzzed_config_files_parse_or_fail_with_one_line(section, field, value):
         assert isinstance(cfg.train, TrainConfig)
 
 
+def parsed_or_named_one_line_error(data: dict, field: str, name: str) -> Config | None:
+    """from_dict(data), or None after checking that it failed with one line naming `field` or `name`."""
+    try:
+        return from_dict(data)
+    except ValueError as exc:
+        assert str(exc) and "\n" not in str(exc)
+        assert printable(field) in str(exc) or printable(name) in str(exc)
+        return None
+
+
 @settings(max_examples=300, deadline=None)
 @given(
     name=st.one_of(st.sampled_from(["none", "viscous", "curl"]), st.text(max_size=6)),
@@ -360,13 +354,8 @@ def test_fuzzed_config_files_parse_or_fail_with_one_line(section, field, value):
 def test_fuzzed_conditions_parse_or_fail_with_one_line(name, field, value):
     data = json.loads(json.dumps(to_dict(Config())))
     data["conditions"].setdefault(name, {})[field] = value
-    try:
-        cfg = from_dict(data)
-    except ValueError as exc:
-        assert str(exc) and "\n" not in str(exc)
-        assert printable(field) in str(exc) or printable(name) in str(exc)
-    else:
-        assert name in [c.name for c in cfg.conditions]
+    cfg = parsed_or_named_one_line_error(data, field, name)
+    assert cfg is None or name in [c.name for c in cfg.conditions]
 
 
 @settings(max_examples=300, deadline=None)
@@ -378,13 +367,8 @@ def test_fuzzed_conditions_parse_or_fail_with_one_line(name, field, value):
 def test_fuzzed_protocols_parse_or_fail_with_one_line(name, field, value):
     data = json.loads(json.dumps(to_dict(Config())))
     data["protocols"][name] = [{"trials": 10, "condition": "viscous"}, {field: value}]
-    try:
-        cfg = from_dict(data)
-    except ValueError as exc:
-        assert str(exc) and "\n" not in str(exc)
-        assert printable(field) in str(exc) or printable(name) in str(exc)
-    else:
-        assert name in [p.name for p in cfg.protocols]
+    cfg = parsed_or_named_one_line_error(data, field, name)
+    assert cfg is None or name in [p.name for p in cfg.protocols]
 
 
 @settings(max_examples=300, deadline=None)
@@ -417,3 +401,27 @@ def test_hidden_pad_is_a_checked_speed_setting_not_a_config_field(argv, message)
     with pytest.raises(ValueError, match="hidden_pad"):
         rollout.Speed(hidden_pad=rollout.MAX_HIDDEN_PAD + 1)
     assert "hidden_pad" not in to_dict(Config())["train"]
+
+
+@pytest.mark.parametrize("run", ["table2", "adaptation"])
+def test_committed_checkpoints_of_earlier_state_layouts_load(run):
+    """runs/table2 stored the learner state flat and before protocols; runs/adaptation flat with protocol fields."""
+    root = Path(__file__).resolve().parent.parent / "runs" / run
+    loaded = run_dir_io.load(root)
+    newest = checkpoint.list_checkpoints(root)[-1]
+    with np.load(newest) as data:
+        stored = {k: data[k] for k in data.files}
+    got = checkpoint.flatten({"states": loaded.batch.states})
+    for name, value in got.items():
+        old = run_dir_io.flat_state_name(name)
+        if old in stored:
+            np.testing.assert_array_equal(value, stored[old], err_msg=name)
+        else:  # a field added since: the run's own condition, block 0, learning on
+            assert name.removeprefix("['states'].").startswith(run_dir_io.ADDED_STATE_FIELDS), name
+    assert "['states'].agent.params['params']['Dense_0']['kernel']" in got
+    states = loaded.batch.states
+    if run == "table2":
+        field = np.asarray(states.env.cond.field.viscous)
+        want = np.asarray(loaded.batch.conds.field.viscous)
+        np.testing.assert_array_equal(field, want)  # each learner's trials run in its own condition
+        assert not np.asarray(states.block.index).any() and np.asarray(states.block.learning).all()

@@ -43,11 +43,11 @@ def test_sharded_chunk_equals_unsharded():
         many = rollout.make_chunk(cfg, 300)
         a = one(one(fresh(), group.plans, group.hypers, budget)[0], group.plans, group.hypers, budget)[0]
         b = many(many(fresh(), group.plans, group.hypers, budget)[0], group.plans, group.hypers, budget)[0]
-        assert len(a.arm.sharding.device_set) == 1
-        assert len(b.arm.sharding.device_set) == {N_DEVICES}
+        assert len(a.env.arm.sharding.device_set) == 1
+        assert len(b.env.arm.sharding.device_set) == {N_DEVICES}
         for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
             np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
-        assert int(np.asarray(a.trials).sum()) > 0
+        assert int(np.asarray(a.counters.trials).sum()) > 0
         print("identical")
         """
     )

@@ -28,6 +28,11 @@ from reach_jax.config import (
 CFG = Config()
 
 
+def without_stats(states):
+    """states without the per-chunk counters."""
+    return states.replace(counters=states.counters.replace(stats=None))
+
+
 def tiny(**train_fields) -> Config:
     """Paper model with a short training schedule."""
     fields = {"trials": 20, "seeds": 1, "chunk_steps": 200, **train_fields}
@@ -134,8 +139,9 @@ def test_trials_end_and_reset_inside_the_scan():
         final, info = trace(rollout.init_learner(jax.random.PRNGKey(0), plan, cfg), plan, rollout.default_hyper(cfg))
         done = np.asarray(info.goal | info.out_of_range | info.cap)
         assert done.sum() >= 5
-        assert int(final.trials) == done.sum() == int(final.stats.trials)
-        assert int(final.stats.goals + final.stats.outs + final.stats.caps) == done.sum()
+        stats = final.counters.stats
+        assert int(final.counters.trials) == done.sum() == int(stats.trials)
+        assert int(stats.goals + stats.outs + stats.caps) == done.sum()
         x = np.asarray(info.x)
         first = np.flatnonzero(done[:-1]) + 1
         if name == "random_nopast":
@@ -182,21 +188,26 @@ def test_exploration_anneals_once_the_curriculum_is_full():
     _, hi = task.curriculum_bounds(cfg)
     cond, hyper = protocol.make_plan("none", cfg), rollout.default_hyper(cfg)
     start = rollout.init_learner(jax.random.PRNGKey(0), cond, cfg)
-    assert int(start.full_at) == -1
+    assert int(start.curriculum.full_at) == -1
     one, many = rollout.make_trace(cfg, 1), rollout.make_trace(cfg, 300)
-    reached = one(start.replace(distance=jnp.asarray(hi), trials=jnp.asarray(7, jnp.int32)), cond, hyper)[0]
-    assert int(reached.full_at) == 7
+    at_top = start.replace(
+        curriculum=start.curriculum.replace(distance=jnp.asarray(hi)),
+        counters=start.counters.replace(trials=jnp.asarray(7, jnp.int32)),
+    )
+    reached = one(at_top, cond, hyper)[0]
+    assert int(reached.curriculum.full_at) == 7
     later, info = many(reached, cond, hyper)
     assert np.any(info.out_of_range | info.cap)  # failures moved the distance down, and full_at stayed
-    assert float(later.distance) < hi and int(later.full_at) == 7
+    assert float(later.curriculum.distance) < hi and int(later.curriculum.full_at) == 7
     full_cfg = dataclasses.replace(cfg, task=dataclasses.replace(cfg.task, curriculum_init_cells=cfg.sensor.n_cells))
-    assert int(rollout.init_learner(jax.random.PRNGKey(0), cond, full_cfg).full_at) == 0
+    assert int(rollout.init_learner(jax.random.PRNGKey(0), cond, full_cfg).curriculum.full_at) == 0
 
     # The rollout explores within the annealed bound: full from the start, halved after one trial.
     annealed = dataclasses.replace(
         full_cfg, learner=dataclasses.replace(full_cfg.learner, noise_final_ratio=0.5, noise_anneal_trials=1)
     )
-    start = rollout.init_learner(jax.random.PRNGKey(0), cond, annealed).replace(trials=jnp.asarray(1, jnp.int32))
+    start = rollout.init_learner(jax.random.PRNGKey(0), cond, annealed)
+    start = start.replace(counters=start.counters.replace(trials=jnp.asarray(1, jnp.int32)))
     hyper = rollout.default_hyper(annealed)
     rnd = np.abs(np.asarray(rollout.make_trace(annealed, 200)(start, cond, hyper)[1].rnd))
     assert rnd.max() <= 0.5 * annealed.learner.noise and rnd.max() > 0.45 * annealed.learner.noise
@@ -208,10 +219,10 @@ def test_frozen_after_budget():
     chunk = rollout.make_chunk(cfg, 400)
     states, log = chunk(group.states, group.plans, group.hypers, jnp.array(1))
     assert log is None  # no per-trial log unless train.trial_log_every asks
-    assert int(states.trials[0]) == 1
+    assert int(states.counters.trials[0]) == 1
     again, _ = chunk(jax.tree.map(jnp.copy, states), group.plans, group.hypers, jnp.array(1))
-    chex.assert_trees_all_equal(again.params, states.params)
-    assert int(again.steps[0]) == int(states.steps[0])
+    chex.assert_trees_all_equal(again.agent.params, states.agent.params)
+    assert int(again.counters.steps[0]) == int(states.counters.steps[0])
 
 
 def test_batched_chunk_matches_pure_single_learner_train():
@@ -222,12 +233,12 @@ def test_batched_chunk_matches_pure_single_learner_train():
     keys = jnp.stack([batch.learner_key(cfg.train.seed, s) for _, s in batch.learner_table(cfg.train)])
     pure = jax.jit(jax.vmap(train.make_train(cfg, n_steps)))(keys, group.plans, group.hypers)
     # Same learner, same draws: batching may only reorder float32 sums.
-    chex.assert_trees_all_close(pure.params, chunked.params, rtol=1e-4, atol=1e-6)
-    np.testing.assert_array_equal(np.asarray(pure.trials), np.asarray(chunked.trials))
+    chex.assert_trees_all_close(pure.agent.params, chunked.agent.params, rtol=1e-4, atol=1e-6)
+    np.testing.assert_array_equal(np.asarray(pure.counters.trials), np.asarray(chunked.counters.trials))
     # Seed s starts from the same weights in every condition; conditions then drive them apart.
     first = jax.tree.leaves(jax.vmap(lambda k: network.init_params(k, cfg))(keys[::2]))[0]
     np.testing.assert_array_equal(first[0], first[1])
-    moved = [float(jnp.abs(a[0] - a[2]).max()) for a in jax.tree.leaves(chunked.params)]
+    moved = [float(jnp.abs(a[0] - a[2]).max()) for a in jax.tree.leaves(chunked.agent.params)]
     assert max(moved) > 0
 
 
@@ -236,9 +247,9 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
     group = batch.init_batch(cfg)
     one = jax.tree.map(lambda a: a[0], group.states)
     wide = rollout.widen_hidden(one, rollout.DEFAULT_SPEED.hidden_pad)
-    (w1, b1), (w2, _), _ = network.dense_layers(wide.params)
+    (w1, b1), (w2, _), _ = network.dense_layers(wide.agent.params)
     assert w1.shape == (n_inputs(cfg), 32) and b1.shape == (32,) and w2.shape == (32, 10)
-    assert wide.pending.u1.shape == (32,)
+    assert wide.agent.pending.u1.shape == (32,)
     chex.assert_trees_all_equal(rollout.narrow_hidden(wide, cfg), one)
     assert rollout.DEFAULT_SPEED.hidden_pad == 8
 
@@ -247,15 +258,15 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
         def body(s, u):
             return rollout.learner_step(s, u, cond, hyper, cfg)[0], None
 
-        return jax.lax.scan(body, state, rollout.step_uniforms(state.key, state.steps, 2000, cfg))[0]
+        return jax.lax.scan(body, state, rollout.step_uniforms(state.key, state.counters.steps, 2000, cfg))[0]
 
     cond, hyper = (jax.tree.map(lambda a: a[0], t) for t in (group.plans, group.hypers))
     learned = learn(wide, cond, hyper)
-    assert int(learned.trials) > 5
-    (w1, b1), (w2, _), _ = network.dense_layers(learned.params)
-    for pad in (w1[:, 30:], b1[30:], w2[30:], learned.pending.u1[30:]):
+    assert int(learned.counters.trials) > 5
+    (w1, b1), (w2, _), _ = network.dense_layers(learned.agent.params)
+    for pad in (w1[:, 30:], b1[30:], w2[30:], learned.agent.pending.u1[30:]):
         np.testing.assert_array_equal(pad, 0.0)
-    assert float(jnp.abs(w1[:, :30] - network.dense_layers(wide.params)[0][0][:, :30]).max()) > 1e-3
+    assert float(jnp.abs(w1[:, :30] - network.dense_layers(wide.agent.params)[0][0][:, :30]).max()) > 1e-3
 
     # The padded layout, like the other Speed settings, is a speed choice only: the results are the same bit for bit.
     budget = jnp.array(10**6)
@@ -268,7 +279,7 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
         )[0]
         for speed in [*speeds, rollout.Speed(sparse_layer1=False)]
     ]
-    assert network.dense_layers(runs[0].params)[0][0].shape == (2, n_inputs(cfg), 30)
+    assert network.dense_layers(runs[0].agent.params)[0][0].shape == (2, n_inputs(cfg), 30)
     for speed, other in zip(speeds[1:], runs[1:], strict=False):
         chex.assert_trees_all_equal(runs[0], other, custom_message=str(speed))
     # The dense layer 1 sums the same non-zero terms in another order: equal to float32 rounding, not bit for bit.
@@ -346,7 +357,7 @@ def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
     assert {(h["noise_final_ratio"], h["noise_anneal_delay"]) for h in hypers} == {(0.5, 0), (0.5, 5), (1, 0), (1, 5)}
     group = batch.init_batch(cfg)
     # Seed s starts from the same weights at every sweep point.
-    w = np.asarray(group.states.params["params"]["Dense_0"]["kernel"])
+    w = np.asarray(group.states.agent.params["params"]["Dense_0"]["kernel"])
     np.testing.assert_array_equal(w[0], w[2])
     assert not np.array_equal(w[0], w[1])
     out = tmp_path / "run"
@@ -380,8 +391,8 @@ def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
     assert cli.train_main([*argv, "--seeds", "2", "--conditions", "random", "--out", str(tmp_path / "one")]) == 0
     alone, _ = run_dir_io.load_batch(tmp_path / "one", run_dir_io.read_config(tmp_path / "one"))
     for i in range(2):
-        got = jax.tree.map(lambda a, i=i: np.asarray(a)[3 + i], whole.states.replace(stats=None))
-        want = jax.tree.map(lambda a, i=i: np.asarray(a)[i], alone.states.replace(stats=None))
+        got = jax.tree.map(lambda a, i=i: np.asarray(a)[3 + i], without_stats(whole.states))
+        want = jax.tree.map(lambda a, i=i: np.asarray(a)[i], without_stats(alone.states))
         chex.assert_trees_all_equal(got, want)
 
 
@@ -400,6 +411,8 @@ def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
     assert all(r["trials"] >= 20 for r in rows if r["chunk"] == chunks)
     group, chunk = run_dir_io.load_batch(out, cfg)
     assert chunk == chunks
-    np.testing.assert_array_equal(np.asarray(group.states.trials), [r["trials"] for r in rows if r["chunk"] == chunks])
+    np.testing.assert_array_equal(
+        np.asarray(group.states.counters.trials), [r["trials"] for r in rows if r["chunk"] == chunks]
+    )
     assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == cli.EXIT_USAGE
     assert "--resume" in capsys.readouterr().err
