@@ -144,9 +144,9 @@ def build_train_parser() -> argparse.ArgumentParser:
         "--protocol",
         dest="protocols",
         type=_conditions,
-        help="comma-separated protocols from the protocols table (shipped: adaptation; add one with --config FILE "
-        "or --set protocols.NAME=JSON); without --conditions only these learners run, and --trials defaults to "
-        "the protocol's length",
+        help="comma-separated protocols from the protocols table (shipped: adaptation, adaptation_control; add "
+        "one with --config FILE or --set protocols.NAME=JSON); without --conditions only these learners run, and "
+        "--trials defaults to the protocol's length",
     )
     p.add_argument(
         "--init-from",

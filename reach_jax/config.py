@@ -145,7 +145,7 @@ class EvalConfig:
     impedance_max_steps: int = 50  # and at its first 50 acting states (1 s), where movements happen (choice)
     impedance_min_sin_elbow: float = 0.2  # states with sin(theta2) below this (J near singular) are skipped (choice)
     test_conditions: tuple[str, ...] = ("none", "viscous")  # Table 2 columns: the conditions every network is tested in
-    adaptation_window: int = 1000  # adaptation curves average this many logged trials per point (choice)
+    adaptation_window: int = 1000  # adaptation windows and curve bins span this many trials (choice)
 
 
 @dataclass(frozen=True)
