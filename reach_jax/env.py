@@ -1,7 +1,8 @@
 """The reaching environment: one arm, one target, one trial (model §1, §2, §5, §6).
 
-gymnax-style: a frozen `EnvState` and pure functions. `reset` starts a trial at rest, `observe` gives the
-network's input, `step` applies a torque for one RK4 step of cfg.arm.dt and reports how the trial stands.
+gymnax-style: a frozen `EnvState` and pure functions, with the trial's condition (its field and input mask) as
+the environment's parameters, passed to each call. `reset` starts a trial at rest, `observe` gives the network's
+input, `step` applies a torque for one RK4 step of cfg.arm.dt and reports how the trial stands.
 Training (`rollout.learner_step`) and the test episodes (`episodes.run_episode`) both step it; the NumPy oracle
 (`reference`) mirrors it. Units: arm state [rad, rad/s], torques [N m], positions [m], forces [N], time in steps.
 """
@@ -27,7 +28,6 @@ class EnvState:
     prev_tau: jax.Array  # (2,) torques one step before [N m] (0 at a trial's first step)
     target: jax.Array  # (2,) target position [m]
     force: jax.Array  # (2,) this trial's random hand force [N]
-    cond: task.Condition  # this trial's field and input mask
     t: jax.Array  # () steps taken in this trial
     drifted: jax.Array  # () bool: the target drifted in this trial
 
@@ -41,7 +41,7 @@ class Outcome(NamedTuple):
     hand: jax.Array  # (2,) hand position [m]
 
 
-def reset(start: jax.Array, target: jax.Array, force: jax.Array, cond: task.Condition) -> EnvState:
+def reset(start: jax.Array, target: jax.Array, force: jax.Array) -> EnvState:
     """A trial from rest at arm state `start` (4,) toward `target` (2,) [m] with random hand force `force` (2,) [N]."""
     return EnvState(
         arm=start,
@@ -49,27 +49,29 @@ def reset(start: jax.Array, target: jax.Array, force: jax.Array, cond: task.Cond
         prev_tau=jnp.zeros(2),
         target=target,
         force=force,
-        cond=cond,
         t=jnp.array(0, jnp.int32),
         drifted=jnp.array(False),
     )
 
 
-def observe(state: EnvState, cfg: Config) -> jax.Array:
-    """(125,) network input: the sensor image and the coded joints, masked by the trial's condition."""
-    return task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, state.cond.input_mask, cfg)
+def observe(state: EnvState, cond: task.Condition, cfg: Config) -> jax.Array:
+    """(125,) network input: the sensor image and the coded joints, masked by the condition's input mask."""
+    return task.observe(state.arm, state.prev_arm, state.prev_tau, state.target, cond.input_mask, cfg)
 
 
-def step(state: EnvState, tau: jax.Array, cfg: Config, drift: bool = True) -> tuple[EnvState, Outcome]:
+def step(
+    state: EnvState, tau: jax.Array, cond: task.Condition, cfg: Config, drift: bool = True
+) -> tuple[EnvState, Outcome]:
     """The trial one step on under torque `tau` (2,) [N m]; the caller starts a new one when the outcome ends it.
 
     Args:
       state: the trial.
       tau: applied torques [N m].
+      cond: the trial's condition, whose field pushes the hand.
       cfg: model config.
       drift: move the target toward the hand once the trial runs long (training); the tests have no drift.
     """
-    moved = arm.step(state.arm, tau, state.cond.field, state.force, cfg.arm)
+    moved = arm.step(state.arm, tau, cond.field, state.force, cfg.arm)
     t = state.t + 1
     hand = arm.hand_position(moved[:2], cfg.arm)
     out_of_range = arm.is_out(moved, cfg.arm)

@@ -94,16 +94,13 @@ def run_episode(policy, params, mask: jax.Array, field: Field, start: jax.Array,
     tau_max = jnp.asarray(cfg.arm.tau_max)
     s0 = jnp.concatenate([arm.inverse_kinematics(start, cfg.arm), jnp.zeros(2)])
     cond = task.Condition(field=field, input_mask=mask)
-    first = env.reset(s0, target, jnp.zeros(2), cond)
+    first = env.reset(s0, target, jnp.zeros(2))
 
     def body(carry, t):
         trial, done, outcome, steps = carry
-        # The condition is the same at every step: taken from outside the loop, not from its carry, so that the
-        # compiled loop reads the field as an invariant (carried, it rounds differently in float32).
-        trial = trial.replace(cond=cond)
         obs = observation(trial.arm, trial.prev_arm, trial.prev_tau, target, start, t, mask, cfg)
         tau = jnp.clip(policy(params, obs), -tau_max, tau_max)
-        moved, result = env.step(trial, tau, cfg, drift=False)
+        moved, result = env.step(trial, tau, cond, cfg, drift=False)
         ended = (result.out_of_range | result.goal) & ~done
         outcome = jnp.where(ended, jnp.where(result.out_of_range, OUT, SUCCESS), outcome)
         steps = jnp.where(ended, t + 1, steps)

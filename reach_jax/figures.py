@@ -277,15 +277,15 @@ ADAPTATION_PANELS = (
 
 
 def _mean_curve(ax, group: list[dict], kind: str, key: str, label: str, **style) -> None:
-    """Each network's curve thin, and their mean (over the bins all of them have) thick."""
+    """Each network's curve thin, and at each bin the mean of the networks that logged a trial there thick."""
     xs = [np.asarray(net["curves"][kind]["trial"]) for net in group]
     ys = [np.asarray(net["curves"][kind][key]) for net in group]
     for x, y in zip(xs, ys, strict=True):
         ax.plot(x, y, lw=0.5, alpha=0.3, **style)
-    width = min((len(y) for y in ys), default=0)
-    if width:
-        mean = np.mean([y[:width] for y in ys], axis=0)
-        ax.plot(xs[0][:width], mean, lw=1.8, label=f"{label}, mean of {len(ys)}", **style)
+    bins = np.unique(np.concatenate(xs)) if xs else np.array([])
+    if len(bins):
+        mean = [np.mean(np.concatenate([y[x == b] for x, y in zip(xs, ys, strict=True)])) for b in bins]
+        ax.plot(bins, mean, lw=1.8, label=f"{label}, mean of {len(ys)}", **style)
 
 
 def adaptation(results: dict, cfg: Config):

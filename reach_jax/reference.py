@@ -691,7 +691,7 @@ class StepRecord(NamedTuple):
 def learner_from_jax(state, cond: Condition) -> Learner:
     """Copy of a `reach_jax.rollout.LearnerState` (one learner) whose trial runs in `cond`.
 
-    Args: state with its trial's (4,) arm, (2,) target etc.; cond the oracle's copy of state.env.cond.
+    Args: state with its trial's (4,) arm, (2,) target etc.; cond the oracle's copy of state.cond.
     Returns: a Learner.
     """
     agent, trial, counters = state.agent, state.env, state.counters

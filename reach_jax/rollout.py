@@ -128,11 +128,12 @@ class Counters:
 
 @struct.dataclass
 class LearnerState:
-    """Everything one learner carries from step to step: agent, environment, protocol block, curriculum, counters."""
+    """Everything one learner carries from step to step: agent, trial and its condition, block, curriculum, counters."""
 
     key: jax.Array  # PRNG key of the learner's per-step draws (`step_uniforms`); fixed for its life
     agent: AgentState
     env: env_lib.EnvState  # this trial
+    cond: task.Condition  # this trial's condition: the environment's parameters (`protocol.trial_condition`)
     block: protocol.BlockState  # this trial's place in the learner's protocol
     curriculum: Curriculum
     counters: Counters
@@ -172,7 +173,8 @@ def init_learner(key: jax.Array, plan: protocol.Plan, cfg: Config) -> LearnerSta
             pending_learning=block.learning,
             n_max=jnp.asarray(cfg.learner.n_max_init),
         ),
-        env=env_lib.reset(start, target, force, cond),
+        env=env_lib.reset(start, target, force),
+        cond=cond,
         block=block,
         curriculum=Curriculum(distance=distance, full_at=jnp.where(distance >= full, 0, -1).astype(jnp.int32)),
         counters=Counters(trials=jnp.array(0, jnp.int32), steps=jnp.array(0, jnp.int32), stats=zero_stats()),
@@ -233,7 +235,7 @@ def learner_step(
     agent, trial, counters, cur = state.agent, state.env, state.counters, state.curriculum
     bound = exploration_bound(hyper, counters.trials, cur.full_at)
     rnd, draws = split_uniforms(u, bound, cfg)
-    x = env_lib.observe(trial, cfg)
+    x = env_lib.observe(trial, state.cond, cfg)
     rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)  # carried in the pending step
     learns = agent.pending_learning if active is None else active & agent.pending_learning
     lr = jnp.where(learns, hyper.lr, 0.0)
@@ -242,7 +244,7 @@ def learner_step(
     params, out, loss, u1 = learner.ts_step(agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None)
 
     tau = network.torque(out[1:], rnd, cfg)
-    cont, outcome = env_lib.step(trial, tau, cfg)
+    cont, outcome = env_lib.step(trial, tau, state.cond, cfg)
     goal, out_of_range, cap = outcome.goal, outcome.out_of_range, outcome.cap
     done = goal | out_of_range | cap
     lc = cfg.learner
@@ -265,8 +267,8 @@ def learner_step(
     full_at = jnp.where(first_full, counters.trials + done, cur.full_at)
     new_cond, new_block = protocol.trial_condition(plan, counters.trials + done, draws.catch)
     start, new_target, force = task.place_trial(draws, distance, new_cond.field, cfg)
-    fresh = {"env": env_lib.reset(start, new_target, force, new_cond), "block": new_block}
-    kept = {"env": cont, "block": state.block}
+    fresh = {"env": env_lib.reset(start, new_target, force), "cond": new_cond, "block": new_block}
+    kept = {"env": cont, "cond": state.cond, "block": state.block}
     record = None
     if state.trace is not None:
         traced = trial_log.advance(state.trace, cont.arm, cont.t, cfg)

@@ -27,7 +27,7 @@ METRICS_FILE = "metrics.jsonl"
 TRIALS_DIR = "trials"  # the per-trial log: one little-endian binary file per column, appended chunk by chunk
 TRIAL_KEYS = {"learner": "<i4", "trial": "<i4", "chunk": "<i4"}  # columns the shell adds to trial_log.COLUMNS
 # LearnerState fields that checkpoints written before protocols lack (each is filled from a fresh batch).
-ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "block")
+ADDED_STATE_FIELDS = ("agent.pending_learning", "cond", "block")
 # Checkpoints written before LearnerState was split stored its fields flat: the groups' names were not in the paths.
 STATE_GROUPS = ("agent", "env", "curriculum", "counters")
 RENAMED_STATE_FIELDS = {"block.index": "block", "block.learning": "learning", "block.catch": "catch"}

@@ -100,7 +100,7 @@ def test_dsdt_and_rk4_match_oracle(case):
         assert np.abs(plain - want_d).max() > 1e-3
 
 
-_ENV_STEP = jax.jit(lambda s, tau: env.step(s, tau, CFG))
+_ENV_STEP = jax.jit(lambda s, tau, c: env.step(s, tau, c, CFG))
 
 
 @pytest.mark.parametrize("case", sorted(FORCE_CASES))
@@ -111,15 +111,15 @@ def test_environment_trial_matches_oracle(case):
     cond = task.Condition(field=fields.make_field(spec), input_mask=encoding.input_mask(True, CFG))
     start = np.concatenate([reference.inverse_kinematics(np.array([-0.09, 0.34]), CFG.arm), np.zeros(2)])
     target = np.array([-0.01, 0.41])
-    trial = env.reset(jnp.asarray(start), jnp.asarray(target), jnp.asarray(force), cond)
+    trial = env.reset(jnp.asarray(start), jnp.asarray(target), jnp.asarray(force))
     state, prev, prev_tau, ref_target = start, start, np.zeros(2), target
     mask = reference.input_mask(True, CFG)
     seen_drift = False
     for t in range(1, 81):
         want_x = reference.observe(state, prev, prev_tau, ref_target, mask, CFG)
-        np.testing.assert_allclose(np.asarray(env.observe(trial, CFG)), want_x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(env.observe(trial, cond, CFG)), want_x, rtol=0, atol=1e-9)
         tau = rng.uniform(-0.5, 0.5, 2) * np.array(CFG.arm.tau_max)
-        trial, outcome = _ENV_STEP(trial, jnp.asarray(tau))
+        trial, outcome = _ENV_STEP(trial, jnp.asarray(tau), cond)
         moved = reference.arm_step(state, tau, spec, force, CFG.arm)
         hand = reference.hand_position(moved[:2], CFG.arm)
         out = reference.is_out(moved, CFG.arm)

@@ -421,7 +421,7 @@ def test_committed_checkpoints_of_earlier_state_layouts_load(run):
     assert "['states'].agent.params['params']['Dense_0']['kernel']" in got
     states = loaded.batch.states
     if run == "table2":
-        field = np.asarray(states.env.cond.field.viscous)
+        field = np.asarray(states.cond.field.viscous)
         want = np.asarray(loaded.batch.conds.field.viscous)
         np.testing.assert_array_equal(field, want)  # each learner's trials run in its own condition
         assert not np.asarray(states.block.index).any() and np.asarray(states.block.learning).all()
