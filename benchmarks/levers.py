@@ -24,6 +24,7 @@ import json
 import os
 import statistics
 import sys
+import time
 from pathlib import Path
 
 from reach_jax import distribute, rollout
@@ -54,7 +55,7 @@ SPEED_OFF = {  # variant -> the rollout.Speed settings that switch its lever off
 def parse(argv=None) -> argparse.Namespace:
     """Command line of the lever benchmark."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--json", type=Path, help="write the results here")
+    p.add_argument("--json", type=Path, help="write the results here (default: a new file in benchmarks/results)")
     p.add_argument("--devices", type=int, default=os.cpu_count(), help="CPU host devices (default: one per core)")
     p.add_argument("--reps", type=int, default=3, help="interleaved rounds over the variants")
     return p.parse_args(argv)
@@ -94,15 +95,17 @@ def main(argv=None) -> int:
     for v in VARIANTS:
         cells = [f"{medians[v][n]:14,.0f} ({medians['all_levers'][n] / medians[v][n]:.2f}x)" for n in BATCHES]
         print(f"{v:>16} " + " ".join(f"{c:>27}" for c in cells))
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        result = {
-            "learner_steps_per_s": {v: {str(n): m for n, m in by.items()} for v, by in medians.items()},
-            "rounds": {v: {str(n): x for n, x in by.items()} for v, by in rounds.items()},
-            "devices": len(jax.devices()),
-            "jax": jax.__version__,
-        }
-        args.json.write_text(json.dumps(result, indent=2) + "\n")
+    result = {
+        "learner_steps_per_s": {v: {str(n): m for n, m in by.items()} for v, by in medians.items()},
+        "rounds": {v: {str(n): x for n, x in by.items()} for v, by in rounds.items()},
+        "devices": len(jax.devices()),
+        "code": throughput.code_version(),
+        "jax": jax.__version__,
+    }
+    path = args.json or throughput.RESULTS / f"levers-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {path}")
     return 0
 
 

@@ -1,11 +1,18 @@
-"""Throughput of the jitted trainer against the NumPy reference loop, on this machine, in one run.
+"""Latency and throughput of the jitted trainer against the NumPy reference loop, on this machine, in one run.
 
-`python benchmarks/throughput.py [--quick] [--json PATH] [--run RUN_DIR] [--devices N] [--compare OLD.json]`
+`python benchmarks/throughput.py [--quick] [--batches N ...] [--json PATH] [--run RUN] [--devices N] [--compare OLD]`
 
-Units: learner-steps per second (one learner advancing one step of cfg.arm.dt, learning included), seconds.
-Every figure is the median of several timed calls of an already compiled chunk. Compile time is the first
-call's time minus that median. The Table-2 estimate takes the trial lengths that a training run reached
-(its metrics.jsonl) and the measured steps per second at the Table-2 batch of 8 learners.
+Units: learner-steps per second (one learner advancing one step of cfg.arm.dt, learning included), microseconds,
+seconds. Every figure is the median of several timed calls of an already compiled chunk. Compile time is the first
+call's time minus that median. Latency is the wall time of one step of the whole batch, learners / (steps/s): the
+batch runs in lockstep, so a chain of dependent steps takes that long per step, whatever the number of devices.
+Latency is timed with chunks of LATENCY_STEPS steps even with --quick, since short calls mostly time the dispatch.
+The Table-2 figures take the steps that each learner of a training run needed (its metrics.jsonl): the critical
+path is the slowest learner's steps times the latency of one learner on one device, the floor for any number of
+devices; the schedule walks the learners' finishing order as the trainer does, each stretch of steps at the
+latency of the batch it runs (`progress.pow2_batch` of the unfinished learners), the estimate of the run itself.
+Each run writes its own JSON, benchmarks/results/throughput-<UTC time>.json unless --json names one, so the
+measurements accumulate instead of overwriting each other.
 `--compare` makes this a regression benchmark: it exits with status 1 if a batch size fell below
 REGRESSION_FLOOR of the old JSON's figure. It is never part of the test suite: speed is measured, not asserted.
 """
@@ -17,29 +24,35 @@ import dataclasses
 import json
 import os
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 from reach_jax import distribute, rollout
 from reach_jax import run_dir as run_dir_io
+from reach_jax.progress import pow2_batch
 
-BATCHES = (1, 8, 32, 128, 512)  # learners per batch; 8 is Table 2 (4 conditions x 2 networks)
-TABLE2_LEARNERS = 8  # networks trained for Table 2
+BATCHES = (1, 2, 4, 8, 32, 128, 512)  # learners per batch; 1-8: the Table-2 batch (4 conditions x 2 seeds) and its tail
 TABLE2_TRIALS = 2_000_000  # trials per network (section 4.4)
 TARGET_SECONDS = 0.4  # wall time of one timed call: long enough that timer noise is < 1%
+LATENCY_BATCH = 1  # the learners whose step time is the critical path's latency: one, on one device
+LATENCY_STEPS = 20_000  # steps per timed call of a small batch under --quick (~0.2 s at 10 us a step)
+SMALL_BATCH = 8  # batches up to this size (the Table-2 batch and its tail) get LATENCY_STEPS under --quick
 REPS, QUICK_REPS = 7, 3  # timed calls per figure
 REFERENCE_STEPS, QUICK_REFERENCE_STEPS = 3000, 500  # NumPy reference steps per timed call
 TAIL_CHUNKS = 5  # chunks at the end of a run whose mean trial length extrapolates the rest
 REGRESSION_FLOOR = 0.7  # --compare fails below this fraction of the old figure (the machine is shared, noisy)
 DEFAULT_RUN = Path("runs/table2")
+RESULTS = Path(__file__).resolve().parent / "results"  # one JSON per measurement
 
 
 def parse(argv=None) -> argparse.Namespace:
     """Command line of the benchmark."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="short timings; the whole run takes under a minute")
-    p.add_argument("--json", type=Path, help="write the results here")
+    p.add_argument("--batches", type=int, nargs="+", default=BATCHES, help=f"learners per batch (default {BATCHES})")
+    p.add_argument("--json", type=Path, help="write the results here (default: a new file in benchmarks/results)")
     p.add_argument("--run", type=Path, default=DEFAULT_RUN, help="training run whose trial lengths to use")
     p.add_argument("--devices", type=int, default=os.cpu_count(), help="CPU host devices (default: one per core)")
     p.add_argument("--compare", type=Path, help="earlier JSON: exit 1 if any batch fell below the floor")
@@ -77,7 +90,8 @@ def time_chunk(
       speed: make_chunk's speed settings.
 
     Returns:
-      {"steps_per_s": learner-steps/s, "compile_s": s, "steps": steps per call, "devices": devices used}.
+      {"steps_per_s": learner-steps/s, "latency_us": us per step of the batch, "compile_s": s,
+      "steps": steps per call, "devices": devices used}.
     """
     import jax
     import jax.numpy as jnp
@@ -94,8 +108,10 @@ def time_chunk(
     per_step = (time.perf_counter() - t0) / probe
     compile_s = first - per_step * probe
 
-    if n_steps is None:  # a chunk long enough that each timed call lasts TARGET_SECONDS; --quick keeps the probe
-        n_steps = probe if quick else max(probe, int(TARGET_SECONDS / per_step))
+    if n_steps is None:  # each timed call lasts TARGET_SECONDS; --quick times large batches with the probe
+        n_steps = max(probe, int(TARGET_SECONDS / per_step))
+        if quick:
+            n_steps = LATENCY_STEPS if n_learners <= SMALL_BATCH else probe
     if n_steps != probe:
         chunk = rollout.make_chunk(cfg, n_steps, devices, speed)
         states = jax.block_until_ready(chunk(states, learners.plans, learners.hypers, budget)[0])  # compile, warm
@@ -107,6 +123,7 @@ def time_chunk(
     used = len(states.env.arm.sharding.device_set)
     return {
         "steps_per_s": n_learners * n_steps / statistics.median(times),
+        "latency_us": statistics.median(times) / n_steps * 1e6,
         "compile_s": compile_s,
         "steps": n_steps,
         "devices": used,
@@ -126,11 +143,11 @@ def time_reference(cfg, quick: bool) -> float:
     return n / statistics.median(times)
 
 
-def schedule_steps(run_dir: Path) -> tuple[float | None, str]:
-    """Steps the slowest Table-2 learner needs for 2e6 trials, from a run's metrics, and how it was found.
+def schedule_steps(run_dir: Path) -> tuple[list[float] | None, str]:
+    """Steps each Table-2 learner needs for 2e6 trials, from a run's metrics, and how they were found.
 
     A learner that has not reached 2e6 trials is extrapolated with the mean trial length of its last
-    TAIL_CHUNKS chunks. The batch runs until its slowest learner is done, so the maximum counts.
+    TAIL_CHUNKS chunks.
     """
     path = Path(run_dir) / run_dir_io.METRICS_FILE
     rows = run_dir_io.read_metrics(run_dir)
@@ -156,7 +173,35 @@ def schedule_steps(run_dir: Path) -> tuple[float | None, str]:
         else f"extrapolated to {TABLE2_TRIALS:,} trials with the mean trial length of each learner's last "
         f"{TAIL_CHUNKS} chunks ({min(m for *_, m in notes):.1f}-{max(m for *_, m in notes):.1f} steps)"
     )
-    return max(needed), how
+    return needed, how
+
+
+def code_version() -> str:
+    """The commit of the reach_jax that this process imported, "-dirty" if its tree has changes, or "unknown"."""
+    try:
+        done = subprocess.run(
+            ["git", "describe", "--always", "--dirty"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=Path(rollout.__file__).parent,
+        )
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return done.stdout.strip()
+
+
+def table2_figures(rows: dict, needed: list[float] | None) -> dict:
+    """The Table-2 critical path and schedule [s] from each learner's steps, or None where a batch is unmeasured."""
+    one = rows.get(LATENCY_BATCH, {}).get("one")
+    critical = None if needed is None or one is None else max(needed) * one["latency_us"] * 1e-6
+    schedule = None
+    if needed and all(pow2_batch(k, len(needed)) in rows for k in range(1, len(needed) + 1)):
+        schedule, done = 0.0, 0.0
+        for k, s in zip(range(len(needed), 0, -1), sorted(needed), strict=True):
+            schedule += (s - done) * rows[pow2_batch(k, len(needed))]["all"]["latency_us"] * 1e-6
+            done = s
+    return {"table2_critical_path_s": critical, "table2_schedule_s": schedule}
 
 
 def main(argv=None) -> int:
@@ -172,51 +217,57 @@ def main(argv=None) -> int:
     every = jax.devices()
     one = every[:1]
     rows = {}
-    for n in BATCHES:
+    for n in args.batches:
         rows[n] = {"all": time_chunk(n, every, cfg, args.quick)}
         sharded = distribute.learner_mesh(n, every).size > 1
         rows[n]["one"] = time_chunk(n, one, cfg, args.quick) if sharded else rows[n]["all"]
         print(f"measured {n} learners", file=sys.stderr, flush=True)
     ref = time_reference(cfg, args.quick)
-    steps, how = schedule_steps(args.run)
-    rate8 = rows[TABLE2_LEARNERS]["all"]["steps_per_s"]
-    estimate = None if steps is None else steps * TABLE2_LEARNERS / rate8
+    needed, how = schedule_steps(args.run)
+    table2 = table2_figures(rows, needed)
 
     print(f"jax {jax.__version__}, {jax.default_backend()}, {len(every)} devices, {os.cpu_count()} cores")
-    header = ("learners", "1 device", f"{len(every)} devices", "scaling", "vs NumPy", "compile")
-    print("{:>8} {:>14} {:>14} {:>8} {:>9} {:>8}".format(*header))
+    header = ("learners", "latency 1 dev", f"latency {len(every)} dev", "1 device", f"{len(every)} devices")
+    print("{:>8} {:>14} {:>14} {:>14} {:>14} {:>9} {:>8}".format(*header, "vs NumPy", "compile"))
     for n, r in rows.items():
         a, o = r["all"], r["one"]
         print(
-            f"{n:8d} {o['steps_per_s']:14,.0f} {a['steps_per_s']:14,.0f} {a['steps_per_s'] / o['steps_per_s']:7.2f}x "
-            f"{a['steps_per_s'] / ref:8.0f}x {a['compile_s']:7.2f}s"
+            f"{n:8d} {o['latency_us']:11.2f} us {a['latency_us']:11.2f} us {o['steps_per_s']:14,.0f} "
+            f"{a['steps_per_s']:14,.0f} {a['steps_per_s'] / ref:8.0f}x {a['compile_s']:7.2f}s"
         )
-    print(f"NumPy reference loop (reach_jax.reference.run_reference): {ref:,.0f} steps/s")
-    if estimate is None:
-        print(how)
-    else:
-        print(f"Table-2 schedule (8 x 2e6 trials): {estimate:,.0f} s = {estimate / 60:.1f} min; {how}")
+    print(f"NumPy reference loop (reach_jax.reference.run_reference): {ref:,.0f} steps/s, {1e6 / ref:.0f} us a step")
+    print(how)
+    for key, label in (("table2_critical_path_s", "critical path"), ("table2_schedule_s", "schedule")):
+        if table2[key] is not None:
+            print(f"Table-2 {label} (8 x 2e6 trials): {table2[key]:,.0f} s = {table2[key] / 60:.1f} min")
+
+    def per_batch(which: str, key: str) -> dict:
+        return {str(n): r[which][key] for n, r in rows.items()}
 
     result = {
-        "learner_steps_per_s": {str(n): r["all"]["steps_per_s"] for n, r in rows.items()},
-        "learner_steps_per_s_one_device": {str(n): r["one"]["steps_per_s"] for n, r in rows.items()},
-        "devices_used": {str(n): r["all"]["devices"] for n, r in rows.items()},
-        "compile_s": {str(n): r["all"]["compile_s"] for n, r in rows.items()},
+        "latency_us": per_batch("all", "latency_us"),
+        "latency_us_one_device": per_batch("one", "latency_us"),
+        "learner_steps_per_s": per_batch("all", "steps_per_s"),
+        "learner_steps_per_s_one_device": per_batch("one", "steps_per_s"),
+        "steps_per_call": per_batch("all", "steps"),
+        "devices_used": per_batch("all", "devices"),
+        "compile_s": per_batch("all", "compile_s"),
         "numpy_reference_steps_per_s": ref,
-        "speedup_vs_reference_at_8": rate8 / ref,
         "devices": len(every),
-        "table2_schedule_steps": steps,
-        "table2_schedule_estimate_s": estimate,
+        "table2_learner_steps": needed,
+        **table2,
         "table2_schedule_source": how,
         "quick": args.quick,
+        "code": code_version(),
         "jax": jax.__version__,
         "backend": jax.default_backend(),
         "cores": os.cpu_count(),
         "benchmark_wall_s": time.perf_counter() - started,
     }
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n")
+    path = args.json or RESULTS / f"throughput-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {path}")
     if args.compare:
         old = json.loads(args.compare.read_text())["learner_steps_per_s"]
         slow = [n for n, v in result["learner_steps_per_s"].items() if n in old and v < REGRESSION_FLOOR * old[n]]

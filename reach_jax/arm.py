@@ -88,7 +88,7 @@ def inverse_jacobian(theta: jax.Array, cfg: ArmConfig) -> jax.Array:
 
 def hand_velocity(state: jax.Array, cfg: ArmConfig) -> jax.Array:
     """(4,) arm state -> (2,) hand velocity [m/s]."""
-    return jacobian(state[:2], cfg) @ state[2:]
+    return fields.matvec2(jacobian(state[:2], cfg), state[2:])
 
 
 def inverse_kinematics(hand: jax.Array, cfg: ArmConfig) -> jax.Array:
@@ -117,7 +117,7 @@ def dsdt(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array
     """Time derivative of the (4,) arm state under (2,) motor torques [N m] and the hand force."""
     theta, omega = state[:2], state[2:]
     hand_force = external_force(state, field, force, cfg)
-    rhs = tau + jacobian(theta, cfg).T @ hand_force - velocity_torque(theta, omega, cfg)
+    rhs = tau + fields.matvec2(jacobian(theta, cfg).T, hand_force) - velocity_torque(theta, omega, cfg)
     m = mass_matrix(theta, cfg)
     det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
     acc = jnp.array([m[1, 1] * rhs[0] - m[0, 1] * rhs[1], m[0, 0] * rhs[1] - m[1, 0] * rhs[0]]) / det

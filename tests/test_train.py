@@ -225,6 +225,28 @@ def test_frozen_after_budget():
     assert int(again.counters.steps[0]) == int(states.counters.steps[0])
 
 
+def test_a_fresh_batch_has_the_types_that_a_chunk_returns():
+    # A weak-typed leaf in the fresh state made the second chunk of every run compile the loop again.
+    cfg = tiny()
+    group = batch.init_batch(cfg)
+    states, _ = rollout.make_chunk(cfg, 20)(group.states, group.plans, group.hypers, jnp.array(10**6))
+    fresh = [jax.typeof(a) for a in jax.tree.leaves(batch.init_batch(cfg).states)]
+    assert fresh == [jax.typeof(a) for a in jax.tree.leaves(states)]
+
+
+def test_matvec2_rounds_as_the_dot_it_replaced():
+    # fields.matvec2 stands for 2x2 @ (2,) products inside the compiled step; it must round as XLA's dot did,
+    # or every committed run would stop being reproducible. Float32, jitted and vmapped as in the step.
+    rng = np.random.default_rng(0)
+    a = jnp.asarray(rng.standard_normal((20_000, 2, 2)), jnp.float32)
+    v = jnp.asarray(rng.standard_normal((20_000, 2)), jnp.float32)
+    fused = jax.jit(jax.vmap(fields.matvec2))(a, v)
+    dot = jax.jit(jax.vmap(jnp.matmul))(a, v)
+    # Written a[:, 0] v[0] + a[:, 1] v[1] instead, a third of these products differ here: XLA:CPU then contracts
+    # the other product into its fused multiply-add.
+    np.testing.assert_array_equal(np.asarray(fused), np.asarray(dot))
+
+
 def test_batched_chunk_matches_pure_single_learner_train():
     cfg = tiny(conditions=("none", "viscous", "random", "random_nopast"), seeds=2)
     n_steps = 60
