@@ -171,7 +171,7 @@ def init_learner(key: jax.Array, plan: protocol.Plan, cfg: Config) -> LearnerSta
             params=network.init_params(k_param, cfg),
             pending=learner.empty_pending(n_inputs(cfg), cfg.network.hidden[0], rows),
             pending_learning=block.learning,
-            n_max=jnp.asarray(cfg.learner.n_max_init, jnp.float32),  # not weak-typed: the chunk's output type
+            n_max=jnp.asarray(cfg.learner.n_max_init, dtype=float),  # strong-typed, as the chunk returns it
         ),
         env=env_lib.reset(start, target, force),
         cond=cond,
