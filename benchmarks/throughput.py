@@ -6,7 +6,7 @@ Units: learner-steps per second (one learner advancing one step of cfg.arm.dt, l
 seconds. Every figure is the median of several timed calls of an already compiled chunk. Compile time is the first
 call's time minus that median. Latency is the wall time of one step of the whole batch, learners / (steps/s): the
 batch runs in lockstep, so a chain of dependent steps takes that long per step, whatever the number of devices.
-Latency is timed with chunks of LATENCY_STEPS steps even with --quick, since short calls mostly time the dispatch.
+Under --quick, batches up to SMALL_BATCH are still timed with LATENCY_STEPS-step chunks: short calls time dispatch.
 The Table-2 figures take the steps that each learner of a training run needed (its metrics.jsonl): the critical
 path is the slowest learner's steps times the latency of one learner on one device, the floor for any number of
 devices; the schedule walks the learners' finishing order as the trainer does, each stretch of steps at the
@@ -50,7 +50,7 @@ RESULTS = Path(__file__).resolve().parent / "results"  # one JSON per measuremen
 def parse(argv=None) -> argparse.Namespace:
     """Command line of the benchmark."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="short timings; the whole run takes under a minute")
+    p.add_argument("--quick", action="store_true", help="shorter timings: large batches with the probe, fewer calls")
     p.add_argument("--batches", type=int, nargs="+", default=BATCHES, help=f"learners per batch (default {BATCHES})")
     p.add_argument("--json", type=Path, help="write the results here (default: a new file in benchmarks/results)")
     p.add_argument("--run", type=Path, default=DEFAULT_RUN, help="training run whose trial lengths to use")
