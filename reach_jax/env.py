@@ -39,6 +39,7 @@ class Outcome(NamedTuple):
     out_of_range: jax.Array  # () bool: a joint left its range
     cap: jax.Array  # () bool: neither, and the trial reached cfg.task.max_trial_time
     hand: jax.Array  # (2,) hand position [m]
+    hand_vel: jax.Array  # (2,) hand velocity [m/s]
 
 
 def reset(start: jax.Array, target: jax.Array, force: jax.Array) -> EnvState:
@@ -75,10 +76,11 @@ def step(
     t = state.t + 1
     hand = arm.hand_position(moved[:2], cfg.arm)
     out_of_range = arm.is_out(moved, cfg.arm)
-    goal = task.goal_reached(hand, arm.hand_velocity(moved, cfg.arm), state.target, cfg) & ~out_of_range
+    hand_vel = arm.hand_velocity(moved, cfg.arm)
+    goal = task.goal_reached(hand, hand_vel, state.target, cfg) & ~out_of_range
     cap = (t >= round(cfg.task.max_trial_time / cfg.arm.dt)) & ~goal & ~out_of_range
     target, moved_target = task.drift_target(state.target, hand, t, cfg) if drift else (state.target, False)
     new = state.replace(
         arm=moved, prev_arm=state.arm, prev_tau=tau, target=target, t=t, drifted=state.drifted | moved_target
     )
-    return new, Outcome(goal=goal, out_of_range=out_of_range, cap=cap, hand=hand)
+    return new, Outcome(goal=goal, out_of_range=out_of_range, cap=cap, hand=hand, hand_vel=hand_vel)

@@ -271,7 +271,7 @@ def learner_step(
     kept = {"env": cont, "cond": state.cond, "block": state.block}
     record = None
     if state.trace is not None:
-        traced = trial_log.advance(state.trace, cont.arm, cont.t, cfg)
+        traced = trial_log.advance(state.trace, outcome.hand, outcome.hand_vel, cont.t, cfg)
         record = trial_log.record(traced, state.block.index, state.block.catch, goal, out_of_range, cont.t, cfg)
         kept["trace"] = traced
         fresh["trace"] = trial_log.start_trace(start, new_target, cfg)

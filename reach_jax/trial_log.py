@@ -52,10 +52,9 @@ def start_trace(start_state: jax.Array, target: jax.Array, cfg: Config) -> Trial
     return TrialTrace(hand, gap / jnp.maximum(distance, 1e-12), distance, zero, zero, zero)
 
 
-def advance(trace: TrialTrace, state: jax.Array, t: jax.Array, cfg: Config) -> TrialTrace:
-    """Trace after the step that left the arm in `state` (4,), the trial's t-th step."""
-    hand = arm.hand_position(state[:2], cfg.arm)
-    speed = jnp.linalg.norm(arm.hand_velocity(state, cfg.arm))
+def advance(trace: TrialTrace, hand: jax.Array, hand_vel: jax.Array, t: jax.Array, cfg: Config) -> TrialTrace:
+    """Trace after the trial's t-th step, which left the hand at `hand` (2,) [m] moving at `hand_vel` (2,) [m/s]."""
+    speed = jnp.linalg.norm(hand_vel)
     moved = hand - trace.start
     faster = speed > trace.peak_speed
     at_direction = t == max(round(cfg.train.direction_time / cfg.arm.dt), 1)
