@@ -13,7 +13,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from reach_jax import protocol, rollout, task
+from reach_jax import hyper, protocol, rollout, task
 from reach_jax.config import Config, TrainConfig, blocks_of
 
 
@@ -22,25 +22,14 @@ class Batch(NamedTuple):
 
     states: rollout.LearnerState
     conds: task.Condition  # the condition each learner ends in: its own, or its protocol's last block's
-    hypers: rollout.Hyper
+    hypers: hyper.Hyper
     plans: protocol.Plan  # what each learner runs, trial by trial
 
 
-# rollout.Hyper field -> the TrainConfig grid that sweeps it (its default is the LearnerConfig field of that name).
-HYPER_GRIDS = {
-    "lr": "lr_grid",
-    "noise": "noise_grid",
-    "lam": "lam_grid",
-    "noise_final_ratio": "noise_final_ratio_grid",
-    "noise_anneal_delay": "noise_anneal_delay_grid",
-    "noise_anneal_trials": "noise_anneal_trials_grid",
-}
-
-
 def hyper_grid(cfg: Config) -> list[dict[str, float]]:
-    """Hyperparameter combinations of a sweep, keyed like rollout.Hyper; the learner defaults when nothing is swept."""
-    axes = [getattr(cfg.train, grid) or (getattr(cfg.learner, name),) for name, grid in HYPER_GRIDS.items()]
-    return [dict(zip(HYPER_GRIDS, combo, strict=True)) for combo in itertools.product(*axes)]
+    """Hyperparameter combinations of a sweep, keyed like hyper.Hyper; the learner defaults when nothing is swept."""
+    axes = [getattr(cfg.train, h.grid) or (getattr(cfg.learner, h.name),) for h in hyper.TABLE]
+    return [dict(zip(hyper.NAMES, combo, strict=True)) for combo in itertools.product(*axes)]
 
 
 def learner_hypers(cfg: Config) -> list[dict[str, float]]:
@@ -53,15 +42,15 @@ def learner_names(train: TrainConfig) -> tuple[str, ...]:
     return train.conditions + train.protocols
 
 
-def hyper_columns(cfg: Config) -> rollout.Hyper:
-    """rollout.Hyper with one value per learner: (L,) arrays in batch order."""
+def hyper_columns(cfg: Config) -> hyper.Hyper:
+    """hyper.Hyper with one value per learner: (L,) arrays in batch order."""
     hypers = learner_hypers(cfg)
-    return rollout.Hyper(**{name: jnp.asarray([float(h[name]) for h in hypers]) for name in HYPER_GRIDS})
+    return hyper.Hyper(**{name: jnp.asarray([float(h[name]) for h in hypers]) for name in hyper.NAMES})
 
 
 def learner_table(train: TrainConfig) -> list[tuple[str, int]]:
     """(condition or protocol, seed index) of every learner, in batch order: name, then sweep point, then seed."""
-    n_grid = math.prod(max(len(getattr(train, grid)), 1) for grid in HYPER_GRIDS.values())
+    n_grid = math.prod(max(len(getattr(train, h.grid)), 1) for h in hyper.TABLE)
     return [(c, s) for c in learner_names(train) for _ in range(n_grid) for s in range(train.seeds)]
 
 

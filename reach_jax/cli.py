@@ -19,7 +19,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from reach_jax import batch, distribute, evaluate, rollout, train
+from reach_jax import batch, distribute, evaluate, hyper, rollout, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import (
@@ -52,7 +52,7 @@ CLUSTER_ENV = {
 TRAIN_FLAGS = {
     **{name: name for name in ("trials", "seeds", "conditions", "seed", "chunk_steps", "keep_every")},
     **{name: name for name in ("protocols", "init_from", "trial_log_every")},
-    **batch.HYPER_GRIDS,
+    **{h.name: h.grid for h in hyper.TABLE},
 }
 
 
@@ -162,26 +162,8 @@ def build_train_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=_non_negative_int, help="master PRNG seed (default 0)")
     p.add_argument("--chunk-steps", type=_positive_int, help="learner steps per compiled chunk")
-    p.add_argument("--lr", type=_numbers, help="learning rate, or a comma-separated sweep grid")
-    p.add_argument("--noise", type=_numbers, help="exploration bound, or a comma-separated sweep grid")
-    p.add_argument("--lam", type=_numbers, help="lambda of eq. 3, or a comma-separated sweep grid")
-    p.add_argument(
-        "--noise-final-ratio",
-        type=_numbers,
-        help="exploration bound after the anneal as a fraction of --noise (1 = no anneal), or a sweep grid",
-    )
-    p.add_argument(
-        "--noise-anneal-delay",
-        type=_numbers,
-        metavar="TRIALS",
-        help="trials from the first full field to the start of the anneal, or a comma-separated sweep grid",
-    )
-    p.add_argument(
-        "--noise-anneal-trials",
-        type=_numbers,
-        metavar="TRIALS",
-        help="length of the anneal in trials, or a comma-separated sweep grid",
-    )
+    for h in hyper.TABLE:
+        p.add_argument(h.flag, type=_numbers, metavar="X[,X...]", help=f"{h.help}; a comma-separated list sweeps it")
     p.add_argument(
         "--keep-every",
         type=_non_negative_int,

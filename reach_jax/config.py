@@ -12,6 +12,7 @@ import json
 import math
 from dataclasses import dataclass, field
 
+from reach_jax import hyper
 from reach_jax.errors import printable
 
 CONFIG_VERSION = 1
@@ -72,20 +73,25 @@ class NetworkConfig:
 
 
 @dataclass(frozen=True)
-class LearnerConfig:
-    """TS actor-critic, eq. 1-3 (model §5). Per-learner copies of lr, noise and lam allow sweeps."""
+class LearnerConstants:
+    """TS actor-critic constants shared by every learner, eq. 1-3 (model §5)."""
 
     p_range: float = 0.8  # P_range of eq. 1
     reward_goal: float = 0.4  # reinforcement at the goal, section 4.2
     reward_out: float = -0.4  # reinforcement at a joint limit, section 4.2
-    lam: float = 0.999  # lambda of eq. 3 (model §11 choice)
     n_max_init: float = 100.0  # N_max[0] [steps] (choice)
-    lr: float = 1.0  # SGD learning rate on squared error (model §11 choice)
-    noise: float = 0.2  # rnd ~ U(-noise, noise) in actor units (model §11 choice)
-    noise_final_ratio: float = 1.0  # bound after the anneal / noise; 1 = no anneal (model §5, §11 choice)
-    noise_anneal_delay: int = 0  # trials from the first full-field trial to the start of the anneal (choice)
-    noise_anneal_trials: int = 300_000  # length of the linear anneal to noise * noise_final_ratio [trials] (choice)
     critic_floor: float = -0.3  # non-terminal critic targets never go below it, so "out" is always worse (choice)
+
+
+# The constants, then the defaults of the per-learner hyperparameters (lr, noise, lam, ...): one field per entry
+# of hyper.TABLE, which says what each is.
+LearnerConfig = dataclasses.make_dataclass(
+    "LearnerConfig",
+    hyper.config_fields(),
+    bases=(LearnerConstants,),
+    frozen=True,
+    namespace={"__doc__": "TS actor-critic, eq. 1-3 (model §5): constants and per-learner hyperparameter defaults."},
+)
 
 
 @dataclass(frozen=True)
@@ -206,7 +212,7 @@ PROTOCOLS = (
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainSettings:
     """One training run: which learners, how long, how it is chunked."""
 
     trials: int = 2_000_000  # trials per learner, section 4.4
@@ -214,17 +220,22 @@ class TrainConfig:
     conditions: tuple[str, ...] = CONDITIONS  # learning conditions (names in Config.conditions), Table 2 rows
     seed: int = 0  # master PRNG seed
     chunk_steps: int = 50_000  # learner steps per compiled chunk; checkpoint and log between chunks
-    lr_grid: tuple[float, ...] = ()  # sweep: learning rates, crossed with the other grids; () = learner.lr
-    noise_grid: tuple[float, ...] = ()  # sweep: exploration bounds; () = learner.noise
-    lam_grid: tuple[float, ...] = ()  # sweep: lambdas of eq. 3; () = learner.lam
-    noise_final_ratio_grid: tuple[float, ...] = ()  # sweep: anneal ratios; () = learner.noise_final_ratio
-    noise_anneal_delay_grid: tuple[float, ...] = ()  # sweep: anneal delays [trials]; () = learner.noise_anneal_delay
-    noise_anneal_trials_grid: tuple[float, ...] = ()  # sweep: anneal lengths [trials]; () = learner.noise_anneal_trials
     keep_every: int = 0  # also keep the checkpoint of every keep_every-th chunk (snapshots); 0 = newest two only
     protocols: tuple[str, ...] = ()  # learners that run protocols (names in Config.protocols), after the conditions
     init_from: str = ""  # a run directory whose final networks start the learners (model §12); "" = fresh weights
     trial_log_every: int = 0  # log every n-th trial's movement to trials/ (model §12); 0 = no per-trial log
     direction_time: float = 0.1  # the logged initial direction is the hand's at this time into the trial [s] (choice)
+
+
+# The settings, then one sweep grid per entry of hyper.TABLE (<name>_grid): the values crossed with the other
+# grids, () = the learner's default.
+TrainConfig = dataclasses.make_dataclass(
+    "TrainConfig",
+    hyper.grid_fields(),
+    bases=(TrainSettings,),
+    frozen=True,
+    namespace={"__doc__": "One training run: its settings and the sweep grids of the per-learner hyperparameters."},
+)
 
 
 @dataclass(frozen=True)
@@ -393,10 +404,9 @@ def _check_names(where: str, names: tuple[str, ...], table: tuple) -> None:
         raise ValueError(f"{where}: must be distinct names from {', '.join(known)}")
 
 
-def _check_learner(learner: LearnerConfig) -> None:
-    for name in ("noise", "noise_final_ratio", "noise_anneal_delay", "noise_anneal_trials"):
-        if not getattr(learner, name) >= 0:
-            raise ValueError(f"learner.{name}: must not be negative")
+def _check_learner(learner) -> None:
+    for name in hyper.NAMES:
+        hyper.check(f"learner.{name}", name, [getattr(learner, name)])
 
 
 def _check_protocols(cfg: Config) -> None:
@@ -433,11 +443,12 @@ def _check_train(cfg: Config) -> None:
         total = sum(b.trials for b in blocks_of(cfg, name))
         if total != train.trials:
             raise ValueError(f"train.trials: {train.trials}, but protocol {name} lasts {total} trials")
-    for name in ("lr_grid", "noise_grid", "lam_grid", "noise_final_ratio_grid", "noise_anneal_trials_grid"):
-        if not all(math.isfinite(v) and v > 0 for v in getattr(train, name)):
-            raise ValueError(f"train.{name}: must hold positive numbers")
-    if not all(math.isfinite(v) and v >= 0 for v in train.noise_anneal_delay_grid):
-        raise ValueError("train.noise_anneal_delay_grid: must hold numbers that are not negative")
+    for h in hyper.TABLE:
+        hyper.check(f"train.{h.grid}", h.name, getattr(train, h.grid))
+    lows = train.noise_value_lo_grid or (cfg.learner.noise_value_lo,)
+    highs = train.noise_value_hi_grid or (cfg.learner.noise_value_hi,)
+    if max(lows) >= min(highs):
+        raise ValueError("learner.noise_value_lo: must lie below noise_value_hi in every sweep point")
 
 
 def first_difference(a: Config, b: Config) -> str | None:

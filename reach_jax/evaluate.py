@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import adaptation, batch, checkpoint, claims, fields, figures, impedance, sensor, stats, task
+from reach_jax import adaptation, checkpoint, claims, fields, figures, hyper, impedance, sensor, stats, task
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import Config
 from reach_jax.episodes import FAIL, OUTCOME_NAMES, SUCCESS, Episode, n_steps, network_policy, run_episodes
@@ -105,12 +105,16 @@ def recipe_index(hypers) -> tuple[list[dict], list[int]]:
     """The distinct hyperparameter sets (recipes) of a batch, in batch order, and each learner's recipe index.
 
     Args:
-      hypers: rollout.Hyper with a leading learner axis.
+      hypers: hyper.Hyper with a leading learner axis.
+
+    Returns:
+      (each recipe's hyperparameters that name it, `hyper.label`; each learner's recipe index).
     """
-    columns = [np.asarray(getattr(hypers, n)) for n in batch.HYPER_GRIDS]
+    columns = [np.asarray(getattr(hypers, n)) for n in hyper.NAMES]
     values = [tuple(float(v) for v in row) for row in zip(*columns, strict=True)]
     distinct = list(dict.fromkeys(values))
-    return [dict(zip(batch.HYPER_GRIDS, v, strict=True)) for v in distinct], [distinct.index(v) for v in values]
+    named = [hyper.label(dict(zip(hyper.NAMES, v, strict=True))) for v in distinct]
+    return named, [distinct.index(v) for v in values]
 
 
 def learning_conditions(learners: list[tuple[str, int]], cfg: Config) -> list[str]:

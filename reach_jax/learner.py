@@ -55,49 +55,34 @@ def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None
     )
 
 
-def ts_targets(pending: Pending, p_now: jax.Array, n_max: jax.Array, cfg: LearnerConfig) -> jax.Array:
+def ts_targets(
+    pending: Pending, p_now: jax.Array, n_max: jax.Array, cfg: LearnerConfig, baseline: jax.Array = 0.0
+) -> jax.Array:
     """Training signal (3,) for the input x(t-1), from eq. 1 (critic) and eq. 2 (actor).
 
     At a trial's end the reinforcement stands in for p(t). Non-terminal critic targets are floored at
     cfg.critic_floor, above the out penalty, so crossing a joint limit always lowers the value (anti-collapse
     guard; see README "The critic floor").
+
+    Args:
+      pending: the step t-1.
+      p_now: () critic output p(t).
+      n_max: () N_max [steps].
+      cfg: learner constants.
+      baseline: () share of P_range/N_max taken from dp in the actor's signal (hyper `actor_baseline`): 0 is
+        eq. 2 as written, 1 the TD error of eq. 1 (a departure from the paper, model §5).
     """
     p_next = jnp.where(pending.terminal, pending.reward, p_now)
-    critic = p_next - cfg.p_range / n_max
+    step_cost = cfg.p_range / n_max
+    critic = p_next - step_cost
     critic = jnp.where(pending.terminal, critic, jnp.maximum(critic, cfg.critic_floor))
-    actor = pending.out[1:] + pending.rnd * (p_next - pending.out[0])
+    actor = pending.out[1:] + pending.rnd * (p_next - pending.out[0] - baseline * step_cost)
     return jnp.concatenate([critic[None], actor])
 
 
 def update_n_max(n_max: jax.Array, n_steps: jax.Array, lam: jax.Array) -> jax.Array:
     """Eq. 3 after a trial that reached the goal in n_steps."""
     return jnp.where(n_steps > lam * n_max, n_steps.astype(n_max.dtype), lam * n_max)
-
-
-def exploration_bound(
-    noise: jax.Array,
-    final_ratio: jax.Array,
-    delay: jax.Array,
-    duration: jax.Array,
-    trials: jax.Array,
-    full_at: jax.Array,
-) -> jax.Array:
-    """() bound b of rnd ~ U(-b, b): `noise`, then a linear anneal to noise * final_ratio.
-
-    The anneal starts `delay` trials after the curriculum first reached the whole field and lasts `duration`
-    trials; before the field is first full there is no anneal, however long that takes.
-
-    Args:
-      noise: () the learner's starting bound.
-      final_ratio: () the bound after the anneal, as a fraction of `noise` (1: no anneal).
-      delay: () trials from the first full field to the start of the anneal.
-      duration: () trials the anneal lasts (at least 1).
-      trials: () trials ended so far.
-      full_at: () trial count when the curriculum first reached its maximum distance; negative before.
-    """
-    done = (trials - full_at - delay) / jnp.maximum(duration, 1.0)
-    frac = jnp.where(full_at < 0, 0.0, jnp.clip(done, 0.0, 1.0))
-    return noise * (1.0 + (final_ratio - 1.0) * frac)
 
 
 def _squash_slope(y: jax.Array) -> jax.Array:
@@ -136,6 +121,7 @@ def ts_step(
     lr: jax.Array,
     cfg: Config,
     rows_now: jax.Array | None = None,
+    baseline: jax.Array = 0.0,
 ):
     """Forward x(t), then one TS backprop step on x(t-1) by hand-written SGD; the rollout's hot path.
 
@@ -149,6 +135,7 @@ def ts_step(
       cfg: model config.
       rows_now: optional (20,) int32 rows holding every non-zero coded unit of x(t)
         (`encoding.coded_support`); the layer-1 products then skip the rows that are 0, about 2/3 of them.
+      baseline: () the actor signal's baseline (`ts_targets`).
 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss (),
@@ -169,7 +156,7 @@ def ts_step(
         acts.append(tuple(network.squash(jnp.sum(a[:, None] * w, axis=0) + b) for a in acts[-1]))
     out_now, out_prev = acts[-1]
 
-    target = ts_targets(pending, out_now[0], n_max, cfg.learner)
+    target = ts_targets(pending, out_now[0], n_max, cfg.learner, baseline)
     err = jnp.where(pending.valid, target - out_prev, 0.0)
     loss = 0.5 * jnp.sum(err**2)
     step = jnp.where(pending.valid, lr, 0.0)
@@ -190,7 +177,9 @@ def ts_step(
     return network.with_dense_layers(params, new_layers), out_now, loss, u1_next
 
 
-def ts_update(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: jax.Array, cfg: Config):
+def ts_update(
+    params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: jax.Array, cfg: Config, baseline: jax.Array = 0.0
+):
     """The TS step by its readable definition: flax forward, autodiff backprop, optax SGD.
 
     `ts_step` is the hand-written fast path used in training; tests hold the two equal.
@@ -202,6 +191,7 @@ def ts_update(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: 
       n_max: () N_max [steps].
       lr: () learning rate.
       cfg: model config.
+      baseline: () the actor signal's baseline (`ts_targets`).
 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss ()).
@@ -209,7 +199,7 @@ def ts_update(params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: 
 
     def loss_fn(p):
         out = network.apply(p, jnp.stack([x_now, pending.x]), cfg)
-        target = jax.lax.stop_gradient(ts_targets(pending, out[0, 0], n_max, cfg.learner))
+        target = jax.lax.stop_gradient(ts_targets(pending, out[0, 0], n_max, cfg.learner, baseline))
         err = target - out[1]
         return 0.5 * jnp.where(pending.valid, jnp.sum(err**2), 0.0), out[0]
 

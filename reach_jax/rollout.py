@@ -19,9 +19,10 @@ import jax.numpy as jnp
 from flax import struct
 from jax.sharding import PartitionSpec
 
-from reach_jax import distribute, encoding, learner, network, protocol, task, trial_log
+from reach_jax import distribute, encoding, exploration, learner, network, protocol, task, trial_log
 from reach_jax import env as env_lib
 from reach_jax.config import Config, n_inputs
+from reach_jax.hyper import Hyper
 
 MAX_HIDDEN_PAD = 128  # largest Speed.hidden_pad: a TPU vector row of float32; wider only wastes memory
 
@@ -49,38 +50,6 @@ class Speed:
 
 
 DEFAULT_SPEED = Speed()
-
-
-@struct.dataclass
-class Hyper:
-    """Per-learner learning constants, so a sweep is just a batch of learners."""
-
-    lr: jax.Array  # () SGD learning rate
-    noise: jax.Array  # () exploration bound rnd ~ U(-noise, noise) until the anneal (learner.exploration_bound)
-    lam: jax.Array  # () lambda of eq. 3
-    noise_final_ratio: jax.Array  # () bound after the anneal as a fraction of `noise`; 1 = no anneal
-    noise_anneal_delay: jax.Array  # () trials from the first full field to the start of the anneal
-    noise_anneal_trials: jax.Array  # () trials the anneal lasts
-
-
-def exploration_bound(hyper: Hyper, trials: jax.Array, full_at: jax.Array) -> jax.Array:
-    """The learner's exploration bound after `trials` trials (`learner.exploration_bound` with its hyperparameters)."""
-    return learner.exploration_bound(
-        hyper.noise, hyper.noise_final_ratio, hyper.noise_anneal_delay, hyper.noise_anneal_trials, trials, full_at
-    )
-
-
-def default_hyper(cfg: Config) -> Hyper:
-    """Hyper from the config's learner defaults."""
-    c = cfg.learner
-    return Hyper(
-        lr=jnp.asarray(c.lr),
-        noise=jnp.asarray(c.noise),
-        lam=jnp.asarray(c.lam),
-        noise_final_ratio=jnp.asarray(c.noise_final_ratio),
-        noise_anneal_delay=jnp.asarray(float(c.noise_anneal_delay)),
-        noise_anneal_trials=jnp.asarray(float(c.noise_anneal_trials)),
-    )
 
 
 class Stats(NamedTuple):
@@ -202,14 +171,14 @@ def step_uniforms(key: jax.Array, first_step: jax.Array, n_steps: int, cfg: Conf
     )
 
 
-def split_uniforms(u: jax.Array, noise: jax.Array, cfg: Config) -> tuple[jax.Array, task.TrialDraws]:
-    """(n_uniforms,) draws in [0, 1) -> ((2,) rnd ~ U(-noise, noise), TrialDraws of a possible new trial)."""
+def split_uniforms(u: jax.Array, cfg: Config) -> tuple[jax.Array, task.TrialDraws]:
+    """(n_uniforms,) draws in [0, 1) -> ((2,) noise draws in [-1, 1), TrialDraws of a possible new trial)."""
     k = cfg.task.target_candidates
-    rnd = noise * (2.0 * u[:2] - 1.0)
+    unit = 2.0 * u[:2] - 1.0
     draws = task.TrialDraws(
         start=u[2:4], target=u[4 : 4 + 2 * k].reshape(k, 2), force=u[4 + 2 * k : 6 + 2 * k], catch=u[6 + 2 * k]
     )
-    return rnd, draws
+    return unit, draws
 
 
 def learner_step(
@@ -233,17 +202,19 @@ def learner_step(
       speed: how the step is computed; only `sparse_layer1` changes the result, and only by float32 rounding.
     """
     agent, trial, counters, cur = state.agent, state.env, state.counters, state.curriculum
-    bound = exploration_bound(hyper, counters.trials, cur.full_at)
-    rnd, draws = split_uniforms(u, bound, cfg)
+    unit, draws = split_uniforms(u, cfg)
     x = env_lib.observe(trial, state.cond, cfg)
     rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)  # carried in the pending step
     learns = agent.pending_learning if active is None else active & agent.pending_learning
     lr = jnp.where(learns, hyper.lr, 0.0)
     sparse = speed.sparse_layer1
     pending_in = agent.pending if sparse else agent.pending._replace(rows=None)
-    params, out, loss, u1 = learner.ts_step(agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None)
-
-    tau = network.torque(out[1:], rnd, cfg)
+    params, out, loss, u1 = learner.ts_step(
+        agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None, hyper.actor_baseline
+    )
+    carried, fresh = exploration.noise(unit, hyper, counters.trials, cur.full_at, out[0], agent.pending.rnd)
+    rnd = carried + fresh
+    tau = network.torque(out[1:] + carried, fresh, cfg)
     cont, outcome = env_lib.step(trial, tau, state.cond, cfg)
     goal, out_of_range, cap = outcome.goal, outcome.out_of_range, outcome.cap
     done = goal | out_of_range | cap

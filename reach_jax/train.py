@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, distribute, rollout, trial_log
+from reach_jax import batch, checkpoint, distribute, exploration, rollout, trial_log
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import Config, TrainConfig
 from reach_jax.progress import LearnerEta, Progress, pow2_batch
@@ -52,7 +52,7 @@ def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, c
     trials, steps = np.asarray(counters.trials), np.asarray(counters.steps)
     distance, n_max, block = np.asarray(cur.distance), np.asarray(states.agent.n_max), np.asarray(states.block.index)
     hypers = batch.learner_hypers(cfg)
-    bound = np.asarray(rollout.exploration_bound(batch.hyper_columns(cfg), counters.trials, cur.full_at))
+    bound = np.asarray(exploration.schedule(batch.hyper_columns(cfg), counters.trials, cur.full_at))
     rows = []
     for i, ((cond, seed), hyper) in enumerate(zip(table, hypers, strict=True)):
         ended = int(s.trials[i])

@@ -1,0 +1,69 @@
+"""The exploration noise rnd of eq. 2 (model §5): its bound's schedule, and the optional forms of it.
+
+The paper says only that rnd is a random number. Our reading is rnd ~ U(-b, b) per step and joint, with b a
+per-learner hyperparameter (`hyper.TABLE`). The optional forms below are off at their neutral values, where
+the noise is b (2u - 1) exactly as before they existed:
+- an anneal of b once the curriculum has reached the whole field (`schedule`);
+- b scaled by the critic's value, smallest where it expects the goal (`value_scale`);
+- trials without noise (`quiet`);
+- AR(1) noise correlated from step to step, with the stationary spread of the white noise (`noise`).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from reach_jax.hyper import Hyper
+
+
+def schedule(h: Hyper, trials: jax.Array, full_at: jax.Array) -> jax.Array:
+    """() bound b after `trials` trials: `noise`, then a linear anneal to noise * noise_final_ratio.
+
+    The anneal starts `noise_anneal_delay` trials after the curriculum first reached the whole field and lasts
+    `noise_anneal_trials` trials; before the field is first full there is no anneal, however long that takes.
+
+    Args:
+      h: the learner's hyperparameters.
+      trials: () trials ended so far.
+      full_at: () trial count when the curriculum first reached its maximum distance; negative before.
+    """
+    done = (trials - full_at - h.noise_anneal_delay) / jnp.maximum(h.noise_anneal_trials, 1.0)
+    frac = jnp.where(full_at < 0, 0.0, jnp.clip(done, 0.0, 1.0))
+    return h.noise * (1.0 + (h.noise_final_ratio - 1.0) * frac)
+
+
+def value_scale(h: Hyper, p: jax.Array) -> jax.Array:
+    """() factor in [noise_value_ratio, 1] on the bound at a state whose critic value is p.
+
+    1 where p <= noise_value_lo (far from the goal, or failing), noise_value_ratio where p >= noise_value_hi
+    (the critic expects the goal soon), linear between.
+    """
+    far = jnp.clip((h.noise_value_hi - p) / (h.noise_value_hi - h.noise_value_lo), 0.0, 1.0)
+    return h.noise_value_ratio + (1.0 - h.noise_value_ratio) * far
+
+
+def quiet(h: Hyper, trials: jax.Array) -> jax.Array:
+    """() bool: trial number `trials` (counted from 0) is one of the every-n-th trials run without noise."""
+    every = jnp.maximum(h.quiet_every, 1.0)
+    return (h.quiet_every > 0) & (jnp.mod(trials + 1, every) == 0)
+
+
+def noise(unit: jax.Array, h: Hyper, trials: jax.Array, full_at: jax.Array, p: jax.Array, prev: jax.Array):
+    """(2,) rnd of this step, as (carried, fresh): rnd = carried + fresh.
+
+    `carried` is the AR(1) share of the previous step's noise, `fresh` this step's draw. The actor adds them in
+    that order (`network.torque(m + carried, fresh)`), which with white noise rounds as m + b (2u - 1) always did.
+
+    Args:
+      unit: (2,) this step's draws, uniform in [-1, 1).
+      h: the learner's hyperparameters.
+      trials: () trials ended before this one.
+      full_at: () trial count when the curriculum first reached the whole field; negative before.
+      p: () the critic's value of this step's input.
+      prev: (2,) the previous step's rnd (0 at the start of training).
+    """
+    b = schedule(h, trials, full_at)
+    b = b * value_scale(h, p)
+    b = jnp.where(quiet(h, trials), 0.0, b)
+    return h.noise_corr * prev, jnp.sqrt(1.0 - h.noise_corr**2) * b * unit

@@ -1,0 +1,138 @@
+"""Per-learner hyperparameters: one table entry each (model §5, §11).
+
+An entry of `TABLE` is the whole of a hyperparameter. From it come the field of `config.LearnerConfig` that holds
+its default, the `config.TrainConfig` grid that sweeps it (`<name>_grid`), its range check, the field of the
+per-learner `Hyper` arrays the compiled step reads, its command-line flag and its place in a recipe's label.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import jax
+from flax import struct
+
+
+@dataclass(frozen=True)
+class Hyperparameter:
+    """One per-learner learning constant."""
+
+    name: str  # field of LearnerConfig and Hyper; its grid is TrainConfig.<name>_grid, its flag --<name with ->
+    default: float  # the value of a run that does not set it
+    help: str  # what it is, with the paper's equation or the documented choice (model §n)
+    low: float = 0.0  # smallest allowed value
+    low_open: bool = False  # True: the value must exceed `low`
+    high: float = math.inf  # largest allowed value
+    high_open: bool = False  # True: the value must stay below `high`
+    integer: bool = False  # a count: stored as a whole number in the config
+    neutral: float | None = None  # the value that switches an optional form off; a recipe label names it only
+    # when another value is set. None: always named.
+
+    @property
+    def grid(self) -> str:
+        """The TrainConfig field that sweeps it."""
+        return f"{self.name}_grid"
+
+    @property
+    def flag(self) -> str:
+        """Its command-line flag."""
+        return "--" + self.name.replace("_", "-")
+
+    def check(self, value: float) -> str | None:
+        """Why `value` is out of range, or None when it is allowed."""
+        too_low = value <= self.low if self.low_open else value < self.low
+        too_high = value >= self.high if self.high_open else value > self.high
+        if math.isfinite(value) and not too_low and not too_high:
+            return None
+        if self.high == math.inf:
+            return "must be positive" if self.low_open and self.low == 0 else "must not be negative"
+        left, right = "(" if self.low_open else "[", ")" if self.high_open else "]"
+        return f"must lie in {left}{self.low:g}, {self.high:g}{right}"
+
+
+TABLE = (
+    Hyperparameter("lr", 1.0, "SGD learning rate on squared error (model §11 choice)", low_open=True),
+    Hyperparameter("noise", 0.2, "exploration bound b of rnd ~ U(-b, b) in actor units (model §11 choice)"),
+    Hyperparameter("lam", 0.999, "lambda of eq. 3 (model §11 choice)", low_open=True),
+    Hyperparameter(
+        "noise_final_ratio", 1.0, "bound after the anneal as a fraction of noise; 1 = no anneal (model §5 choice)"
+    ),
+    Hyperparameter(
+        "noise_anneal_delay", 0, "trials from the first full-field trial to the start of the anneal", integer=True
+    ),
+    Hyperparameter("noise_anneal_trials", 300_000, "length of the linear anneal [trials]", integer=True),
+    Hyperparameter(
+        "noise_value_ratio",
+        1.0,
+        "smallest bound, where the critic expects the goal, as a fraction of the bound; 1 = off (model §5 choice)",
+        high=1.0,
+        neutral=1.0,
+    ),
+    Hyperparameter(
+        "noise_value_hi", 0.3, "critic value p at or above which the bound is smallest (model §5 choice)", neutral=0.3
+    ),
+    Hyperparameter(
+        "noise_value_lo", 0.0, "critic value p at or below which the bound is whole (model §5 choice)", neutral=0.0
+    ),
+    Hyperparameter(
+        "noise_corr",
+        0.0,
+        "step-to-step correlation of rnd, AR(1) with the spread kept; 0 = white (model §5 choice)",
+        high=1.0,
+        high_open=True,
+        neutral=0.0,
+    ),
+    Hyperparameter(
+        "actor_baseline",
+        0.0,
+        "share of P_range/N_max taken from dp in eq. 2's actor signal; 1 = the TD error (departs from eq. 2, model §5)",
+        high=1.0,
+        neutral=0.0,
+    ),
+    Hyperparameter(
+        "quiet_every",
+        0,
+        "every n-th trial runs without exploration; 0 = never (model §5 choice)",
+        integer=True,
+        neutral=0,
+    ),
+)
+
+NAMES = tuple(h.name for h in TABLE)
+BY_NAME = {h.name: h for h in TABLE}
+
+Hyper = struct.dataclass(
+    type(
+        "Hyper",
+        (),
+        {
+            "__annotations__": {h.name: jax.Array for h in TABLE},
+            "__doc__": "Per-learner learning constants, () arrays each (a sweep is just a batch of learners).",
+        },
+    )
+)
+
+
+def config_fields() -> list[tuple]:
+    """The LearnerConfig fields of the table: (name, type, default)."""
+    return [(h.name, int if h.integer else float, dataclasses.field(default=h.default)) for h in TABLE]
+
+
+def grid_fields() -> list[tuple]:
+    """The TrainConfig sweep grids of the table: (name, type, default ()); () takes the learner's default."""
+    return [(h.grid, tuple[float, ...], dataclasses.field(default=())) for h in TABLE]
+
+
+def check(where: str, name: str, values) -> None:
+    """Raise ValueError "where: why" if any of `values` is out of the hyperparameter `name`'s range."""
+    for value in values:
+        why = BY_NAME[name].check(value)
+        if why:
+            raise ValueError(f"{where}: {why}")
+
+
+def label(values: dict[str, float]) -> dict[str, float]:
+    """The hyperparameters that name a recipe: every one without a neutral value, the others where they are on."""
+    return {k: v for k, v in values.items() if BY_NAME[k].neutral is None or v != BY_NAME[k].neutral}
