@@ -1,7 +1,8 @@
 """The paper's five claims and its Table 2 as verdicts computed over networks, with confidence intervals.
 
 Units: success and out are fractions of a network's 1040 test pairs (percentage points in the Markdown), times
-are seconds, angles degrees, damping N s/m. Every interval is a Student-t interval over networks (`stats`).
+are seconds, angles degrees, damping N s/m. Every interval is a Student-t interval over networks (`stats`), on the
+logit scale for success and out rates (`stats.rate_ci`).
 
 Networks are grouped into recipes (one per sweep point of a run, a single one otherwise); within a recipe the
 networks of different learning conditions are paired by seed index, since seed s starts from the same initial
@@ -84,7 +85,7 @@ def claim_matched(cells: Cells, c: ClaimsConfig) -> dict:
     """Claim 1: when learning and test conditions match, success is high."""
     numbers = {
         f"{k}->{k}": {
-            "success": stats.mean_ci(cells.get(k, k, "success"), c.level),
+            "success": stats.rate_ci(cells.get(k, k, "success"), c.level),
             "paper": paper_cell(k, k)["success"],
         }
         for k in ("none", "viscous")
@@ -178,8 +179,8 @@ def claim_aftereffect(cells: Cells, after: dict, c: ClaimsConfig) -> dict:
 def claim_random_robust(cells: Cells, c: ClaimsConfig) -> dict:
     """Claim 4: random-force learning makes the arm robust to the field, unlike learning without forces."""
     d = stats.paired_ci(cells.drop("random"), cells.drop("none"), c.level)
-    s_none = stats.mean_ci(cells.get("random", "none", "success"), c.level)
-    s_field = stats.mean_ci(cells.get("random", "viscous", "success"), c.level)
+    s_none = stats.rate_ci(cells.get("random", "none", "success"), c.level)
+    s_field = stats.rate_ci(cells.get("random", "viscous", "success"), c.level)
     numbers = {
         "field_cost_random_minus_none": {**d, "paper": _paper_drop("random") - _paper_drop("none")},
         "random->none": {"success": s_none, "paper": paper_cell("random", "none")["success"]},
@@ -240,9 +241,8 @@ def table_cells(cells: Cells, c: ClaimsConfig) -> list[dict]:
     for learning, test in [*PAPER_TABLE2, *others]:
         if not cells.has(learning) or not len(cells.get(learning, test, "success")):
             continue
-        ours = {
-            name: stats.mean_ci(cells.get(learning, test, name), c.level) for name in ("success", "out", "mean_time_s")
-        }
+        ours = {name: stats.rate_ci(cells.get(learning, test, name), c.level) for name in ("success", "out")}
+        ours["mean_time_s"] = stats.mean_ci(cells.get(learning, test, "mean_time_s"), c.level)
         paper = paper_cell(learning, test) if (learning, test) in PAPER_TABLE2 else None
         near = None
         if paper is not None:
@@ -343,7 +343,8 @@ def claims_markdown(result: dict, source: str) -> str:
         lines += [
             f"## Recipe {k}: {name} ({recipe['networks_per_condition']} networks per condition)",
             "",
-            f"Intervals are {recipe['level']:.0%} t-intervals over networks; differences are paired by seed.",
+            f"Intervals are {recipe['level']:.0%} t-intervals over networks, on the logit scale for success and out"
+            " rates; differences are paired by seed.",
             "",
             "| claim | test | ours | paper | verdict |",
             "|---|---|---|---|---|",

@@ -430,6 +430,11 @@ def build_evaluate_parser() -> argparse.ArgumentParser:
     p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run directory written by reach_jax.train")
     p.add_argument("--checkpoint", type=Path, metavar="PATH", help="evaluate this checkpoint instead of the newest")
     p.add_argument("--out", type=Path, metavar="DIR", help="write the results here instead of RUN_DIR/eval")
+    p.add_argument(
+        "--claims-only",
+        action="store_true",
+        help="decide the claims again from RUN_DIR/eval's files (claims.json/.md, table2.md), without new episodes",
+    )
     return p
 
 
@@ -438,6 +443,12 @@ def evaluate_main(argv=None) -> int:
     parser = build_evaluate_parser()
     try:
         args = parser.parse_args(argv)
+        if args.claims_only:
+            if args.checkpoint or args.out:
+                raise UsageError("--claims-only reads and rewrites RUN_DIR/eval: no --checkpoint or --out")
+            evaluate.redecide(args.run_dir)
+            print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
+            return 0
         distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
         run = run_dir_io.load(args.run_dir, args.checkpoint)
     except (UsageError, CheckpointError) as exc:

@@ -49,6 +49,7 @@ import numpy as np
 
 from reach_jax import adaptation, checkpoint, claims, fields, figures, hyper, impedance, sensor, stats, task
 from reach_jax import run_dir as run_dir_io
+from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config
 from reach_jax.episodes import FAIL, OUTCOME_NAMES, SUCCESS, Episode, n_steps, network_policy, run_episodes
 from reach_jax.panels import CORNER_NAMES, FIG4_PANELS, corner_pairs
@@ -180,9 +181,10 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
     lines = [
         f"# Table 2 — {source}",
         "",
-        f"Mean per network with its {level:.0%} t-interval over networks, {table['pairs_per_network']} (start,"
-        " target) pairs per network; out and fail count as 4.0 s in the mean time. Beside it, success-out-fail"
-        f" (mean time) summed over our networks of seeds 0 and 1, and the paper's sum over its {claims.PAPER_NETWORKS}"
+        f"Mean per network with its {level:.0%} t-interval over networks (on the logit scale for success and out),"
+        f" {table['pairs_per_network']} (start, target) pairs per network; out and fail count as 4.0 s in the mean"
+        " time. Beside it, success-out-fail (mean time) summed over our networks of seeds 0 and 1, and the paper's"
+        f" sum over its {claims.PAPER_NETWORKS}"
         ' networks. "near paper": success and out within the target\'s percentage points, time within its'
         " fraction (S / O / T).",
     ]
@@ -558,7 +560,6 @@ def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
 def evaluate_run(data: run_dir_io.Run) -> dict:
     """Run the test protocol on every network of a run; JSON-ready results and the arrays for the figures."""
     cfg = data.cfg
-    level = cfg.claims.level
     starts, targets = test_pairs(cfg)
     c_starts, c_targets, c_corner = corner_pairs(cfg)
     params, masks = data.batch.states.agent.params, data.batch.conds.input_mask
@@ -620,23 +621,7 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
     imp = impedance.summarize(gains, data.learners, cfg.eval.test_conditions, viscous)
     for row in imp["per_network"]:
         row["recipe"] = recipe_of[row["learner"]]
-    verdicts = []
-    for k, hypers in enumerate(recipes):
-        nets = [i for i in range(len(data.learners)) if recipe_of[i] == k]
-        cells = claims.Cells([r for r in table["per_network"] if r["recipe"] == k], table["pairs_per_network"])
-        after_k = pool_aftereffect([a for a in per_seed if a["recipe"] == k], level)
-        verdicts.append(
-            {
-                "hypers": hypers,
-                "level": level,
-                "networks_per_condition": cfg.train.seeds,
-                "claims": claims.recipe_claims(cells, after_k, cfg),
-                "aftereffect": after_k,
-                "cells": claims.table_cells(cells, cfg.claims),
-                "impedance": impedance_cells(imp, nets, level),
-                "curriculum": claims.curriculum_stability(data.metrics, nets, cfg.train.trials, cfg),
-            }
-        )
+    verdicts = decide(table, per_seed, imp, recipes, recipe_of, data.metrics, cfg)
     trials = np.asarray(data.batch.states.counters.trials)
     return {
         "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
@@ -649,6 +634,67 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
         "corners": (c_starts, c_targets, c_corner),
         "gains": gains,
     }
+
+
+def decide(
+    table: dict, per_seed: list[dict], imp: dict, recipes: list[dict], recipe_of: list[int], metrics: list[dict], cfg
+) -> list[dict]:
+    """The claims of each recipe, from the Table-2 counts, the after-effect per seed, the impedance and the metrics.
+
+    Args:
+      table: `table2` results (its per-network counts).
+      per_seed: the after-effect measures per (recipe, seed) (`aftereffect`).
+      imp: `impedance.summarize` results, each per-network row with its recipe.
+      recipes: each recipe's hyperparameters (`recipe_index`).
+      recipe_of: (N,) recipe index per network.
+      metrics: the run's metrics.jsonl rows up to the evaluated checkpoint.
+      cfg: model config.
+    """
+    level = cfg.claims.level
+    verdicts = []
+    for k, hypers in enumerate(recipes):
+        nets = [i for i in range(len(recipe_of)) if recipe_of[i] == k]
+        cells = claims.Cells([r for r in table["per_network"] if r["recipe"] == k], table["pairs_per_network"])
+        after_k = pool_aftereffect([a for a in per_seed if a["recipe"] == k], level)
+        verdicts.append(
+            {
+                "hypers": hypers,
+                "level": level,
+                "networks_per_condition": cfg.train.seeds,
+                "claims": claims.recipe_claims(cells, after_k, cfg),
+                "aftereffect": after_k,
+                "cells": claims.table_cells(cells, cfg.claims),
+                "impedance": impedance_cells(imp, nets, level),
+                "curriculum": claims.curriculum_stability(metrics, nets, cfg.train.trials, cfg),
+            }
+        )
+    return verdicts
+
+
+def redecide(run_dir: Path) -> dict:
+    """Decide the claims again from a run's committed eval/ files, without running the test episodes again.
+
+    For a change in how claims are decided (the statistics, the criteria's presentation): the test episodes
+    round differently in float32 on another CPU, where a few of a network's 2080 movements can change outcome.
+    Rewrites eval/claims.json, claims.md and table2.md; returns the new claims results.
+    """
+    run_dir = Path(run_dir)
+    out = run_dir / EVAL_DIR
+    files = [out / f"{n}.json" for n in ("table2", "aftereffect", "impedance")]
+    for path in files:
+        if not path.is_file():
+            raise CheckpointError(f"{path}: missing; evaluate the run in full first")
+    table, after, imp = (json.loads(path.read_text()) for path in files)
+    cfg = run_dir_io.read_config(run_dir)
+    recipe_of = list(dict(sorted({r["learner"]: r["recipe"] for r in imp["per_network"]}.items())).values())
+    metrics = run_dir_io.read_metrics(run_dir, table["chunk"])
+    verdicts = decide(table, after.get("per_seed", []), imp, imp["recipes"], recipe_of, metrics, cfg)
+    result = {"chunk": table["chunk"], "trials_per_network": cfg.train.trials, "recipes": verdicts}
+    source = f"{run_dir} (chunk {table['chunk']})"
+    checkpoint.atomic_write_bytes(out / "claims.json", json.dumps(result, indent=2).encode())
+    checkpoint.atomic_write_bytes(out / "table2.md", table2_markdown(table, verdicts, source).encode())
+    checkpoint.atomic_write_bytes(out / "claims.md", claims.claims_markdown(result, source).encode())
+    return result
 
 
 def write_results(run_dir: Path, data: run_dir_io.Run, results: dict, out: Path | None = None) -> Path:

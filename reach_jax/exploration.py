@@ -5,7 +5,7 @@ per-learner hyperparameter (`hyper.TABLE`). The optional forms below are off at 
 the noise is b (2u - 1) exactly as before they existed:
 - an anneal of b once the curriculum has reached the whole field (`schedule`);
 - b scaled by the critic's value, smallest where it expects the goal (`value_scale`);
-- trials without noise (`quiet`);
+- trials without noise, the correlated share included (`quiet`);
 - AR(1) noise correlated from step to step, with the stationary spread of the white noise (`noise`).
 """
 
@@ -63,7 +63,6 @@ def noise(unit: jax.Array, h: Hyper, trials: jax.Array, full_at: jax.Array, p: j
       p: () the critic's value of this step's input.
       prev: (2,) the previous step's rnd (0 at the start of training).
     """
-    b = schedule(h, trials, full_at)
-    b = b * value_scale(h, p)
-    b = jnp.where(quiet(h, trials), 0.0, b)
-    return h.noise_corr * prev, jnp.sqrt(1.0 - h.noise_corr**2) * b * unit
+    silent = quiet(h, trials)
+    b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * value_scale(h, p))
+    return jnp.where(silent, 0.0, h.noise_corr * prev), jnp.sqrt(1.0 - h.noise_corr**2) * b * unit

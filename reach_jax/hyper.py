@@ -10,9 +10,9 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any, NamedTuple
 
-import jax
-from flax import struct
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -103,16 +103,9 @@ TABLE = (
 NAMES = tuple(h.name for h in TABLE)
 BY_NAME = {h.name: h for h in TABLE}
 
-Hyper = struct.dataclass(
-    type(
-        "Hyper",
-        (),
-        {
-            "__annotations__": {h.name: jax.Array for h in TABLE},
-            "__doc__": "Per-learner learning constants, () arrays each (a sweep is just a batch of learners).",
-        },
-    )
-)
+# A NamedTuple is a JAX pytree without importing JAX here: config and the NumPy oracle import this table.
+Hyper = NamedTuple("Hyper", [(h.name, Any) for h in TABLE])
+Hyper.__doc__ = "Per-learner learning constants, one () array each (a sweep is just a batch of learners)."
 
 
 def config_fields() -> list[tuple]:
@@ -134,5 +127,10 @@ def check(where: str, name: str, values) -> None:
 
 
 def label(values: dict[str, float]) -> dict[str, float]:
-    """The hyperparameters that name a recipe: every one without a neutral value, the others where they are on."""
-    return {k: v for k, v in values.items() if BY_NAME[k].neutral is None or v != BY_NAME[k].neutral}
+    """The hyperparameters that name a recipe: every one without a neutral value, the others where they are on.
+
+    Values read from a batch are float32, so they are compared with the neutral value at that precision.
+    """
+    return {
+        k: v for k, v in values.items() if BY_NAME[k].neutral is None or np.float32(v) != np.float32(BY_NAME[k].neutral)
+    }

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from reach_jax import hyper
 from reach_jax.config import ArmConfig, ConditionConfig, Config, LearnerConfig, SensorConfig, blocks_of, condition
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -452,10 +453,10 @@ class Pending:
     reward: float  # reinforcement that ended the trial, 0 otherwise
 
 
-def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig) -> np.ndarray:
-    """Eq. 1 (critic, floored unless terminal) and eq. 2 (actor).
+def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig, baseline: float = 0.0) -> np.ndarray:
+    """Eq. 1 (critic, floored unless terminal) and eq. 2 (actor), with the actor's optional baseline.
 
-    Args: p_now () p(t), n_max () [steps].
+    Args: p_now () p(t), n_max () [steps], baseline () share of P_range/N_max taken from dp (0: eq. 2).
     Returns: (3,) targets.
     """
     p_next = pending.reward if pending.terminal else p_now  # reinforcement stands in for p(t) at a trial's end
@@ -463,7 +464,8 @@ def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig)
     if not pending.terminal:
         critic = max(critic, cfg.critic_floor)
     p_prev = pending.out[0]
-    actor = [pending.out[1 + j] + pending.rnd[j] * (p_next - p_prev) for j in range(2)]  # eq. 2
+    signal = p_next - p_prev - baseline * cfg.p_range / n_max  # dp of eq. 2, less the baseline
+    actor = [pending.out[1 + j] + pending.rnd[j] * signal for j in range(2)]  # eq. 2
     return np.array([critic, actor[0], actor[1]])
 
 
@@ -478,16 +480,31 @@ def update_n_max(n_max: float, n_steps: int, lam: float) -> float:
     return lam * n_max
 
 
-def ts_update(layers, x_now, pending: Pending, n_max: float, lr: float, cfg: Config):
+def exploration_noise(unit, bound: float, p: float, prev, trials: int, h: dict) -> np.ndarray:
+    """rnd (2,) of one step (model §5): the bound scaled by the critic's value, none on quiet trials, AR(1).
+
+    Args: unit (2,) draws in [-1, 1), bound () the schedule's bound, p () the critic's value of the step's input,
+      prev (2,) the previous step's rnd, trials () trials ended before this one, h the learner's hyperparameters.
+    """
+    far = min(1.0, max(0.0, (h["noise_value_hi"] - p) / (h["noise_value_hi"] - h["noise_value_lo"])))
+    b = bound * (h["noise_value_ratio"] + (1.0 - h["noise_value_ratio"]) * far)
+    every = h["quiet_every"]
+    if every > 0 and (trials + 1) % every == 0:
+        return np.zeros(2)  # a quiet trial: no noise at all
+    rho = h["noise_corr"]
+    return np.array([rho * prev[j] + math.sqrt(1.0 - rho * rho) * b * unit[j] for j in range(2)])
+
+
+def ts_update(layers, x_now, pending: Pending, n_max: float, lr: float, cfg: Config, baseline: float = 0.0):
     """Outputs at x(t) with W(t), then one TS step on x(t-1).
 
-    Args: x_now (125,), n_max () [steps], lr ().
+    Args: x_now (125,), n_max () [steps], lr (), baseline () of the actor's signal (`ts_targets`).
     Returns: (layers, out (3,), loss ()).
     """
     out_now = forward(layers, x_now)[-1]
     if not pending.valid:
         return layers, out_now, 0.0
-    target = ts_targets(pending, out_now[0], n_max, cfg.learner)
+    target = ts_targets(pending, out_now[0], n_max, cfg.learner, baseline)
     new, loss = sgd_step(layers, pending.x, target, lr, cfg.network.use_bias)
     return new, out_now, loss
 
@@ -680,6 +697,7 @@ class StepRecord(NamedTuple):
 
     x: np.ndarray  # (125,) input
     out: np.ndarray  # (3,) outputs before the update
+    rnd: np.ndarray  # (2,) exploration noise
     tau: np.ndarray  # (2,) [N m]
     arm: np.ndarray  # (4,) arm state after the move (before any reset)
     goal: bool
@@ -724,16 +742,18 @@ def learner_from_jax(state, cond: Condition) -> Learner:
     )
 
 
-def learner_step(lrn: Learner, plan: list[Block], lr: float, lam: float, rnd, draws: Draws, cfg: Config):
-    """One step: observe, forward, TS update, act, RK4, outcome, reset into the plan's next trial.
+def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, draws: Draws, cfg: Config):
+    """One step: observe, forward, TS update, explore, act, RK4, outcome, reset into the plan's next trial.
 
-    Args: plan the learner's blocks, rnd (2,) noise in actor units, draws for a new trial.
+    Args: plan the learner's blocks, h its hyperparameters (names of hyper.TABLE), bound () the exploration
+      schedule's bound, unit (2,) the step's noise draws in [-1, 1), draws for a new trial.
     Returns: (Learner, StepRecord).
     """
     cond = lrn.cond
     x = observe(lrn.arm, lrn.prev_arm, lrn.prev_tau, lrn.target, cond.input_mask, cfg)
-    layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr if lrn.pending_learning else 0.0, cfg)
-    rnd = np.array(rnd, dtype=np.float64)
+    lr = h["lr"] if lrn.pending_learning else 0.0
+    layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg, h["actor_baseline"])
+    rnd = exploration_noise(unit, bound, out[0], lrn.pending.rnd, lrn.trials, h)
     tau = torque(out[1:], rnd, cfg)
     moved = arm_step(lrn.arm, tau, cond.field, lrn.force, cfg.arm)
     t = lrn.t + 1
@@ -749,7 +769,7 @@ def learner_step(lrn: Learner, plan: list[Block], lr: float, lam: float, rnd, dr
 
     new = replace(lrn, layers=layers, pending=pending, steps=lrn.steps + 1, pending_learning=lrn.learning)
     if goal:
-        new.n_max = update_n_max(lrn.n_max, t, lam)
+        new.n_max = update_n_max(lrn.n_max, t, h["lam"])
     if done:
         new.distance = update_curriculum(lrn.distance, goal, lrn.drifted, lrn.was_full, cfg)
         new.was_full = lrn.was_full or new.distance >= curriculum_bounds(cfg)[1]
@@ -762,7 +782,7 @@ def learner_step(lrn: Learner, plan: list[Block], lr: float, lam: float, rnd, dr
         target, moved_target = drift_target(lrn.target, hand, t, cfg)
         new.arm, new.prev_arm, new.prev_tau = moved, np.array(lrn.arm), tau
         new.target, new.t, new.drifted = target, t, lrn.drifted or moved_target
-    return new, StepRecord(x, out, tau, moved, goal, out_of_range, cap, loss)
+    return new, StepRecord(x, out, rnd, tau, moved, goal, out_of_range, cap, loss)
 
 
 def draw_trial(rng: np.random.Generator, cfg: Config) -> Draws:
@@ -813,11 +833,11 @@ def run_reference(n_steps: int, seed: int, cfg: Config, condition: str = "none")
     rng = np.random.default_rng(seed)
     plan = make_plan(condition, cfg)
     lrn = init_learner(rng, plan, cfg)
-    lc = cfg.learner
+    h = {name: float(getattr(cfg.learner, name)) for name in hyper.NAMES}
     counts = {"goals": 0, "outs": 0, "caps": 0}
     for _ in range(n_steps):
-        rnd = rng.uniform(-lc.noise, lc.noise, 2)
-        lrn, rec = learner_step(lrn, plan, lc.lr, lc.lam, rnd, draw_trial(rng, cfg), cfg)
+        unit = rng.uniform(-1.0, 1.0, 2)
+        lrn, rec = learner_step(lrn, plan, h, h["noise"], unit, draw_trial(rng, cfg), cfg)
         counts["goals"] += rec.goal
         counts["outs"] += rec.out_of_range
         counts["caps"] += rec.cap

@@ -1,4 +1,4 @@
-"""Statistics over networks: Student-t confidence intervals of means and of paired differences.
+"""Statistics over networks: Student-t confidence intervals of means, of rates and of paired differences.
 
 Units: whatever the sample carries (fractions, seconds); interval levels are probabilities in (0, 1).
 Pure Python and NumPy, so a verdict does not depend on the accelerator or on a statistics package.
@@ -88,6 +88,32 @@ def mean_ci(sample, level: float = 0.95) -> dict:
         return {"mean": mean, "low": None, "high": None, "n": n}
     half = t_quantile(0.5 + 0.5 * level, n - 1) * float(x.std(ddof=1)) / math.sqrt(n)
     return {"mean": mean, "low": mean - half, "high": mean + half, "n": n}
+
+
+def rate_ci(sample, level: float = 0.95) -> dict:
+    """Mean of rates in [0, 1] with a Student-t interval on the logit scale, so that it stays inside [0, 1].
+
+    The interval is logit(mean) +- t * se / (mean (1 - mean)) mapped back (the delta method): near a bound it is
+    asymmetric and never crosses it. When every network has the same rate (0 or 1 included) it is that rate.
+
+    Args:
+      sample: (n,) rates, one per network (success or out fractions).
+      level: coverage of the interval.
+
+    Returns:
+      {"mean", "low", "high", "n"} as `mean_ci`.
+    """
+    plain = mean_ci(sample, level)
+    mean, n = plain["mean"], plain["n"]
+    if n < 2:
+        return plain
+    sd = float(np.std(np.asarray(sample, dtype=np.float64), ddof=1))
+    if sd == 0.0 or not 0.0 < mean < 1.0:
+        return {"mean": mean, "low": mean, "high": mean, "n": n}
+    centre = math.log(mean / (1.0 - mean))
+    half = t_quantile(0.5 + 0.5 * level, n - 1) * sd / math.sqrt(n) / (mean * (1.0 - mean))
+    low, high = (1.0 / (1.0 + math.exp(-(centre + sign * half))) for sign in (-1.0, 1.0))
+    return {"mean": mean, "low": low, "high": high, "n": n}
 
 
 def paired_ci(a, b, level: float = 0.95) -> dict:

@@ -6,9 +6,10 @@ import sys
 import time
 from pathlib import Path
 
+import jax.numpy as jnp
 import pytest
 
-from reach_jax import checkpoint, distribute
+from reach_jax import checkpoint, distribute, hyper
 
 
 def _train_until_killed(argv: list[str], out: Path, chunk: int = 3) -> Path:
@@ -38,3 +39,8 @@ def train_until_killed():
 def pytest_configure(config):
     """Give the test process (and the subprocesses it starts, which inherit XLA_FLAGS) the CLIs' backend flags."""
     distribute.add_xla_flags()
+
+
+def default_hyper(cfg) -> hyper.Hyper:
+    """One learner's hyperparameters: the config's learner defaults, as () arrays."""
+    return hyper.Hyper(**{name: jnp.asarray(float(getattr(cfg.learner, name))) for name in hyper.NAMES})

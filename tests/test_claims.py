@@ -83,6 +83,30 @@ def test_t_quantiles_and_intervals():
     assert 0.93 < inside / 2000 < 0.97
 
 
+def test_rate_intervals_stay_inside_0_1_and_cover():
+    # The held-out run's viscous -> viscous success had the t-interval [95.1, 100.4]; near a bound the logit-scale
+    # interval is asymmetric, inside [0, 1], and keeps the mean.
+    near_one = np.array([1.0, 0.999, 0.998, 0.93, 0.99, 0.97, 0.995, 0.935])
+    t, rate = stats.mean_ci(near_one), stats.rate_ci(near_one)
+    assert t["high"] > 1.0 and 0.0 < rate["low"] < rate["mean"] < rate["high"] < 1.0
+    assert rate["mean"] == t["mean"] and rate["high"] - rate["mean"] < rate["mean"] - rate["low"]
+    # Far from the bounds it agrees with the t-interval to first order.
+    middle = np.array([0.50, 0.52, 0.48, 0.51, 0.49, 0.50])
+    assert (stats.rate_ci(middle)["low"], stats.rate_ci(middle)["high"]) == pytest.approx(
+        (stats.mean_ci(middle)["low"], stats.mean_ci(middle)["high"]), abs=1e-4
+    )
+    # Every network alike, at a bound or not: the interval is that rate; one network: no interval.
+    assert stats.rate_ci([0.0, 0.0, 0.0])["low"] == stats.rate_ci([0.0, 0.0, 0.0])["high"] == 0.0
+    assert stats.rate_ci([1.0, 1.0])["low"] == 1.0 and stats.rate_ci([0.3])["low"] is None
+    # Coverage of the mean of 8 networks' rates drawn around 0.95 (beta-distributed): close to the nominal 95%.
+    rng = np.random.default_rng(1)
+    inside = 0
+    for _ in range(2000):
+        ci = stats.rate_ci(rng.beta(19.0, 1.0, 8))
+        inside += ci["low"] <= 0.95 <= ci["high"]
+    assert 0.92 < inside / 2000 < 0.98
+
+
 def test_paper_numbers_make_every_claim_hold_and_every_cell_near():
     got = verdicts(paper_like())
     assert [got[k]["verdict"] for k in range(1, 6)] == [claims.HOLDS] * 5

@@ -399,3 +399,24 @@ def test_python_api_evaluates_into_a_chosen_folder_and_loads_the_trained_paramet
     one = jax.tree.map(lambda a: a[0], params)
     out = network.apply(one, jnp.zeros(125), CFG)
     assert out.shape == (3,) and bool(jnp.all(jnp.isfinite(out)))
+
+
+def test_claims_only_decides_the_committed_files_again_as_the_full_evaluation_did(tiny_run, tmp_path, capsys):
+    copy = tmp_path / "copy"
+    shutil.copytree(tiny_run, copy)
+    assert cli.evaluate_main([str(copy)]) == 0
+    out = copy / evaluate.EVAL_DIR
+    full = {n: (out / n).read_bytes() for n in ("claims.json", "claims.md", "table2.md")}
+    for name in full:
+        (out / name).unlink()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert cli.evaluate_main([str(copy), "--claims-only"]) == 0
+    assert {n: (out / n).read_bytes() for n in full} == full  # the same verdicts, byte for byte
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.name not in full} == before  # nothing else touched
+    # Without the evaluation's files it is a one-line error, and it takes no other output folder.
+    assert cli.evaluate_main([str(tiny_run), "--claims-only", "--out", str(tmp_path / "x")]) == cli.EXIT_USAGE
+    fresh = tmp_path / "fresh"
+    shutil.copytree(tiny_run, fresh, ignore=shutil.ignore_patterns(evaluate.EVAL_DIR))
+    assert cli.evaluate_main([str(fresh), "--claims-only"]) == cli.EXIT_USAGE
+    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    assert len(errors) == 2 and "--claims-only" in errors[0] and "table2.json: missing" in errors[1]

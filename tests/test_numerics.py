@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import default_hyper
 
 from reach_jax import arm, encoding, env, fields, learner, network, protocol, reference, rollout, sensor, task
 from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_dict
@@ -533,11 +534,26 @@ ROLLOUT_CFG = from_dict(
 ROLLOUT_SEEDS = (2, 3)
 
 
-def test_rollout_replays_in_oracle():
-    cfg = ROLLOUT_CFG
+# Every exploration form on at once (model §5): the bound scaled by the critic's value, AR(1) noise, quiet trials
+# and the actor's baseline. The value range covers the critic's outputs of these young networks (about -0.1 to
+# 0.1), so the scaling acts; quiet_every 2 makes every other trial noise-free.
+EXPLORATION_FORMS = {
+    "noise_value_ratio": 0.25,
+    "noise_value_hi": 0.05,
+    "noise_value_lo": -0.05,
+    "noise_corr": 0.8,
+    "actor_baseline": 1.0,
+    "quiet_every": 2,
+}
+
+
+@pytest.mark.parametrize("forms", [{}, EXPLORATION_FORMS], ids=["eq2-white-noise", "exploration-forms"])
+def test_rollout_replays_in_oracle(forms):
+    cfg = dataclasses.replace(ROLLOUT_CFG, learner=dataclasses.replace(ROLLOUT_CFG.learner, **forms))
     plan = protocol.make_plan("replay", cfg)
     ref_plan = reference.make_plan("replay", cfg)
-    hyper = rollout.default_hyper(cfg)
+    hyper = default_hyper(cfg)
+    h = {name: float(v) for name, v in hyper._asdict().items()}
     trace = rollout.make_trace(cfg, ROLLOUT_STEPS)  # compiled once, run for each seed
     seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0, "catch": 0, "frozen": 0}
     for seed in ROLLOUT_SEEDS:
@@ -545,13 +561,15 @@ def test_rollout_replays_in_oracle():
         state = state.replace(agent=state.agent.replace(params=_float64_params(state.agent.params)))
         final, infos = trace(state, plan, hyper)
         infos = jax.tree.map(np.asarray, infos)
+        units = 2.0 * np.asarray(rollout.step_uniforms(state.key, 0, ROLLOUT_STEPS, cfg))[:, :2] - 1.0
 
         lrn = reference.learner_from_jax(state, ref_plan[0].cond)  # the first block has no catch trials
         recs = []
         for i in range(ROLLOUT_STEPS):
             draws = reference.Draws(*(a[i] for a in infos.draws))
             was_drifted, trials = lrn.drifted, lrn.trials
-            lrn, rec = reference.learner_step(lrn, ref_plan, cfg.learner.lr, cfg.learner.lam, infos.rnd[i], draws, cfg)
+            lrn, rec = reference.learner_step(lrn, ref_plan, h, cfg.learner.noise, units[i], draws, cfg)
+            seen["quiet"] = seen.get("quiet", 0) + (not np.any(lrn.pending.rnd))
             seen["drift"] += (not was_drifted) and lrn.drifted
             if lrn.trials > trials:
                 block = next(b for b in ref_plan if lrn.trials < b.end)
@@ -569,6 +587,7 @@ def test_rollout_replays_in_oracle():
         # while any modelling difference moves them by 1e-6 or more within one step.
         np.testing.assert_allclose(infos.arm, np.array([r.arm for r in recs]), rtol=0, atol=1e-9)
         np.testing.assert_allclose(infos.tau, np.array([r.tau for r in recs]), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(infos.rnd, np.array([r.rnd for r in recs]), rtol=0, atol=1e-9)
         np.testing.assert_allclose(infos.x, np.array([r.x for r in recs]), rtol=0, atol=1e-9)
         np.testing.assert_allclose(infos.out, np.array([r.out for r in recs]), rtol=0, atol=1e-9)
         np.testing.assert_allclose(infos.loss, np.array([r.loss for r in recs]), rtol=0, atol=1e-9)
@@ -582,8 +601,10 @@ def test_rollout_replays_in_oracle():
         assert float(final.curriculum.distance) == pytest.approx(lrn.distance, abs=1e-12)
         assert int(final.counters.trials) == lrn.trials and int(trial.t) == lrn.t and bool(trial.drifted) == lrn.drifted
 
-    # The reset path (and each way of ending a trial, and the drift) was exercised.
+    # The reset path (and each way of ending a trial, and the drift) was exercised; quiet steps only where asked.
+    quiet = seen.pop("quiet")
     assert all(v > 0 for v in seen.values()), seen
+    assert (quiet > 0) == bool(forms), quiet
 
 
 def test_run_reference_runs():

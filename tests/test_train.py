@@ -10,8 +10,24 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import default_hyper
 
-from reach_jax import arm, batch, cli, encoding, fields, learner, network, protocol, rollout, sensor, task, train
+from reach_jax import (
+    arm,
+    batch,
+    cli,
+    encoding,
+    exploration,
+    fields,
+    learner,
+    network,
+    protocol,
+    rollout,
+    sensor,
+    task,
+    train,
+)
+from reach_jax import hyper as hyper_lib
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import (
     CONDITIONS,
@@ -53,6 +69,10 @@ def test_ts_targets_follow_eq_1_and_2():
     got = learner.ts_targets(pending, jnp.array(p_now), jnp.array(n_max), lc)
     np.testing.assert_allclose(got[0], p_now - lc.p_range / n_max, rtol=1e-6)
     np.testing.assert_allclose(got[1:], [0.2 + 0.05 * (p_now - 0.1), -0.3 - 0.1 * (p_now - 0.1)], rtol=1e-6)
+    # The actor's baseline (a departure from eq. 2): at 1 the signal is the critic's TD error; the critic is unchanged.
+    td = p_now - lc.p_range / n_max - 0.1
+    based = learner.ts_targets(pending, jnp.array(p_now), jnp.array(n_max), lc, jnp.array(1.0))
+    np.testing.assert_allclose(based, [got[0], 0.2 + 0.05 * td, -0.3 - 0.1 * td], rtol=1e-6)
 
 
 def test_terminal_reward_stands_in_for_p_and_floor_guards_only_non_terminal():
@@ -136,7 +156,7 @@ def test_trials_end_and_reset_inside_the_scan():
     joints = n_past - 2 * cfg.encoding.tau_units
     for name in ("none", "random_nopast"):
         plan = protocol.make_plan(name, cfg)
-        final, info = trace(rollout.init_learner(jax.random.PRNGKey(0), plan, cfg), plan, rollout.default_hyper(cfg))
+        final, info = trace(rollout.init_learner(jax.random.PRNGKey(0), plan, cfg), plan, default_hyper(cfg))
         done = np.asarray(info.goal | info.out_of_range | info.cap)
         assert done.sum() >= 5
         stats = final.counters.stats
@@ -159,7 +179,7 @@ def test_draws_do_not_depend_on_how_steps_are_split():
     cfg = tiny()
     cond = protocol.make_plan("random", cfg)
     state = rollout.init_learner(jax.random.PRNGKey(3), cond, cfg)
-    hyper = rollout.default_hyper(cfg)
+    hyper = default_hyper(cfg)
     whole, info = rollout.make_trace(cfg, 150)(state, cond, hyper)
     half, first = rollout.make_trace(cfg, 70)(state, cond, hyper)
     split, second = rollout.make_trace(cfg, 80)(half, cond, hyper)
@@ -168,17 +188,62 @@ def test_draws_do_not_depend_on_how_steps_are_split():
     assert 150 > 2 * rollout.DEFAULT_SPEED.draw_block and len(np.unique(np.asarray(info.rnd)[:, 0])) == 150
 
 
+def test_exploration_forms_at_their_neutral_values_are_white_noise_bit_for_bit():
+    h = default_hyper(CFG)
+    unit = jax.random.uniform(jax.random.PRNGKey(0), (500, 2), minval=-1.0, maxval=1.0)
+    p = jax.random.uniform(jax.random.PRNGKey(1), (500,), minval=-0.5, maxval=0.5)
+    prev = jax.random.uniform(jax.random.PRNGKey(2), (500, 2), minval=-0.2, maxval=0.2)
+    carried, fresh = jax.vmap(lambda u, v, q: exploration.noise(u, h, jnp.asarray(9), jnp.asarray(-1), v, q))(
+        unit, p, prev
+    )
+    assert not np.any(np.asarray(carried))
+    np.testing.assert_array_equal(np.asarray(fresh), np.asarray(h.noise * unit))
+    assert all(n in hyper_lib.NAMES for n in ("noise_value_ratio", "noise_corr", "actor_baseline", "quiet_every"))
+
+
+def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():
+    h = default_hyper(CFG)._replace(
+        noise_value_ratio=jnp.asarray(0.25), noise_value_hi=jnp.asarray(0.3), noise_value_lo=jnp.asarray(0.1)
+    )
+    scale = jax.jit(lambda p: exploration.value_scale(h, p))
+    for p, want in ((-0.4, 1.0), (0.1, 1.0), (0.2, 0.625), (0.3, 0.25), (0.45, 0.25)):
+        assert float(scale(p)) == pytest.approx(want, abs=1e-6), p
+    quiet = jax.jit(lambda t, k: exploration.quiet(h._replace(quiet_every=jnp.asarray(k)), t))
+    assert [bool(quiet(t, 3.0)) for t in range(7)] == [False, False, True, False, False, True, False]
+    assert not any(bool(quiet(t, 0.0)) for t in range(7))
+    carried, fresh = exploration.noise(
+        jnp.ones(2), h._replace(quiet_every=jnp.asarray(3.0), noise_corr=jnp.asarray(0.5)), 2, -1, 0.0, jnp.ones(2)
+    )
+    assert not np.any(np.asarray(carried)) and not np.any(np.asarray(fresh))  # quiet: the carried share too
+
+
+def test_correlated_exploration_keeps_the_spread_of_white_noise():
+    rho = 0.8
+    h = default_hyper(CFG)._replace(noise_corr=jnp.asarray(rho))
+    unit = jax.random.uniform(jax.random.PRNGKey(5), (200_000, 2), minval=-1.0, maxval=1.0)
+
+    def body(prev, u):
+        carried, fresh = exploration.noise(u, h, 0, -1, 0.0, prev)
+        return carried + fresh, carried + fresh
+
+    rnd = np.asarray(jax.lax.scan(body, jnp.zeros(2), unit)[1])[1000:]
+    white_sd = CFG.learner.noise / np.sqrt(3.0)  # sd of U(-b, b)
+    assert rnd.std(axis=0) == pytest.approx([white_sd, white_sd], rel=0.03)
+    lag1 = [np.corrcoef(rnd[:-1, j], rnd[1:, j])[0, 1] for j in range(2)]
+    assert lag1 == pytest.approx([rho, rho], abs=0.01)
+
+
 def test_exploration_anneals_once_the_curriculum_is_full():
     lc = LearnerConfig(noise=0.2, noise_final_ratio=0.5, noise_anneal_trials=1000)
-    hyper = rollout.default_hyper(dataclasses.replace(CFG, learner=lc))
-    bound = jax.jit(lambda t, f, h=hyper: rollout.exploration_bound(h, t, f))
+    hyper = default_hyper(dataclasses.replace(CFG, learner=lc))
+    bound = jax.jit(lambda t, f, h=hyper: exploration.schedule(h, t, f))
     assert float(bound(5000, -1)) == pytest.approx(0.2)  # curriculum not full yet: no anneal, however long
     assert float(bound(100, 100)) == pytest.approx(0.2)
     assert float(bound(600, 100)) == pytest.approx(0.15)
     assert float(bound(1100, 100)) == pytest.approx(0.1)
     assert float(bound(10**6, 100)) == pytest.approx(0.1)
     # With a delay the anneal starts that many trials after the field was first full.
-    delayed = hyper.replace(noise_anneal_delay=jnp.asarray(2000.0))
+    delayed = hyper._replace(noise_anneal_delay=jnp.asarray(2000.0))
     assert float(bound(2100, 100, delayed)) == pytest.approx(0.2)
     assert float(bound(2600, 100, delayed)) == pytest.approx(0.15)
     assert float(bound(3100, 100, delayed)) == pytest.approx(0.1)
@@ -186,7 +251,7 @@ def test_exploration_anneals_once_the_curriculum_is_full():
     # In a rollout, full_at records the trial count when the distance first reaches its maximum, once.
     cfg = tiny()
     _, hi = task.curriculum_bounds(cfg)
-    cond, hyper = protocol.make_plan("none", cfg), rollout.default_hyper(cfg)
+    cond, hyper = protocol.make_plan("none", cfg), default_hyper(cfg)
     start = rollout.init_learner(jax.random.PRNGKey(0), cond, cfg)
     assert int(start.curriculum.full_at) == -1
     one, many = rollout.make_trace(cfg, 1), rollout.make_trace(cfg, 300)
@@ -208,7 +273,7 @@ def test_exploration_anneals_once_the_curriculum_is_full():
     )
     start = rollout.init_learner(jax.random.PRNGKey(0), cond, annealed)
     start = start.replace(counters=start.counters.replace(trials=jnp.asarray(1, jnp.int32)))
-    hyper = rollout.default_hyper(annealed)
+    hyper = default_hyper(annealed)
     rnd = np.abs(np.asarray(rollout.make_trace(annealed, 200)(start, cond, hyper)[1].rnd))
     assert rnd.max() <= 0.5 * annealed.learner.noise and rnd.max() > 0.45 * annealed.learner.noise
 
