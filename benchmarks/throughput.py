@@ -131,8 +131,8 @@ def time_chunk(
 
 
 def time_reference(cfg, quick: bool) -> float:
-    """Median steps/s of reach_jax.reference.run_reference (one NumPy learner, float64)."""
-    from reach_jax import reference
+    """Median steps/s of reach_jax.testing.reference.run_reference (one NumPy learner, float64)."""
+    from reach_jax.testing import reference
 
     n = QUICK_REFERENCE_STEPS if quick else REFERENCE_STEPS
     times = []
@@ -235,7 +235,7 @@ def main(argv=None) -> int:
             f"{n:8d} {o['latency_us']:11.2f} us {a['latency_us']:11.2f} us {o['steps_per_s']:14,.0f} "
             f"{a['steps_per_s']:14,.0f} {a['steps_per_s'] / ref:8.0f}x {a['compile_s']:7.2f}s"
         )
-    print(f"NumPy reference loop (reach_jax.reference.run_reference): {ref:,.0f} steps/s, {1e6 / ref:.0f} us a step")
+    print(f"NumPy reference loop (testing.reference.run_reference): {ref:,.0f} steps/s, {1e6 / ref:.0f} us a step")
     print(how)
     for key, label in (("table2_critical_path_s", "critical path"), ("table2_schedule_s", "schedule")):
         if table2[key] is not None:

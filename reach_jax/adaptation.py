@@ -13,6 +13,7 @@ import numpy as np
 
 from reach_jax import stats
 from reach_jax.config import ConditionConfig, Config, blocks_of, condition
+from reach_jax.outcomes import SUCCESS
 
 M_TO_CM = 100.0
 
@@ -123,7 +124,7 @@ def curves(trials: dict, starts: np.ndarray, field: ConditionConfig, size: int) 
     measures = {
         "perp_cm": trials["perp_error_m"] * sign * M_TO_CM,
         "direction_deg": np.degrees(trials["direction_error_rad"]) * sign,
-        "success": (trials["outcome"] == 0).astype(float),
+        "success": (trials["outcome"] == SUCCESS).astype(float),
     }
     out = {}
     for kind, catch, width in (("normal", False, size), ("catch", True, CATCH_BIN * size)):

@@ -1,4 +1,4 @@
-"""Atomic, versioned checkpoints of batched learner pytrees, and atomic file writes.
+"""Atomic, versioned checkpoints of batched learner pytrees.
 
 A checkpoint is one .npz holding every leaf under its pytree path, plus a JSON `__meta__` entry
 (format version, chunk index, learner table). Files are written to a temporary name, fsynced and
@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import io
 import json
-import os
 import zipfile
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import jax
 import numpy as np
 
 from reach_jax.errors import OneLineError
+from reach_jax.files import atomic_write_bytes
 
 FORMAT_VERSION = 2  # 2: sparse layer-1 rows in the pending step, per-step draws keyed by step index
 CHECKPOINT_DIR = "checkpoints"
@@ -25,38 +25,6 @@ KEEP = 2  # newest checkpoints kept on disk
 
 class CheckpointError(OneLineError):
     """A checkpoint or run directory that cannot be used; the message names the file and field."""
-
-
-def _fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write data to path via a fsynced temporary file and a rename."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    _fsync_dir(path.parent)
-
-
-def append_lines(path: Path, lines: list[str]) -> None:
-    """Append whole lines with a single write and fsync, so no line is torn."""
-    with open(path, "ab") as f:
-        f.write("".join(line + "\n" for line in lines).encode())
-        f.flush()
-        os.fsync(f.fileno())
 
 
 def flatten(tree) -> dict[str, np.ndarray]:

@@ -20,10 +20,9 @@ import jax.numpy as jnp
 from reach_jax import arm, env, network, task
 from reach_jax.config import Config
 from reach_jax.fields import Field
+from reach_jax.outcomes import FAIL, OUT, SUCCESS
 
 # Outcome codes of an episode.
-SUCCESS, OUT, FAIL = 0, 1, 2
-OUTCOME_NAMES = ("success", "out", "fail")
 
 
 class Obs(NamedTuple):

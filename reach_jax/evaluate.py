@@ -47,11 +47,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import adaptation, checkpoint, claims, fields, figures, hyper, impedance, sensor, stats, task
+from reach_jax import adaptation, claims, fields, figures, files, hyper, impedance, sensor, stats, task
 from reach_jax import run_dir as run_dir_io
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config
-from reach_jax.episodes import FAIL, OUTCOME_NAMES, SUCCESS, Episode, n_steps, network_policy, run_episodes
+from reach_jax.episodes import Episode, n_steps, network_policy, run_episodes
+from reach_jax.outcomes import FAIL, SUCCESS
+from reach_jax.outcomes import NAMES as OUTCOME_NAMES
 from reach_jax.panels import CORNER_NAMES, FIG4_PANELS, corner_pairs
 
 EVAL_DIR = "eval"
@@ -680,20 +682,20 @@ def redecide(run_dir: Path) -> dict:
     """
     run_dir = Path(run_dir)
     out = run_dir / EVAL_DIR
-    files = [out / f"{n}.json" for n in ("table2", "aftereffect", "impedance")]
-    for path in files:
+    paths = [out / f"{n}.json" for n in ("table2", "aftereffect", "impedance")]
+    for path in paths:
         if not path.is_file():
             raise CheckpointError(f"{path}: missing; evaluate the run in full first")
-    table, after, imp = (json.loads(path.read_text()) for path in files)
+    table, after, imp = (json.loads(path.read_text()) for path in paths)
     cfg = run_dir_io.read_config(run_dir)
     recipe_of = list(dict(sorted({r["learner"]: r["recipe"] for r in imp["per_network"]}.items())).values())
     metrics = run_dir_io.read_metrics(run_dir, table["chunk"])
     verdicts = decide(table, after.get("per_seed", []), imp, imp["recipes"], recipe_of, metrics, cfg)
     result = {"chunk": table["chunk"], "trials_per_network": cfg.train.trials, "recipes": verdicts}
     source = f"{run_dir} (chunk {table['chunk']})"
-    checkpoint.atomic_write_bytes(out / "claims.json", json.dumps(result, indent=2).encode())
-    checkpoint.atomic_write_bytes(out / "table2.md", table2_markdown(table, verdicts, source).encode())
-    checkpoint.atomic_write_bytes(out / "claims.md", claims.claims_markdown(result, source).encode())
+    files.atomic_write_bytes(out / "claims.json", json.dumps(result, indent=2).encode())
+    files.atomic_write_bytes(out / "table2.md", table2_markdown(table, verdicts, source).encode())
+    files.atomic_write_bytes(out / "claims.md", claims.claims_markdown(result, source).encode())
     return result
 
 
@@ -703,12 +705,12 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: dict, out: Path 
     out = Path(run_dir) / EVAL_DIR if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
     for name in RESULT_FILES:
-        checkpoint.atomic_write_bytes(out / f"{name}.json", json.dumps(results[name], indent=2).encode())
+        files.atomic_write_bytes(out / f"{name}.json", json.dumps(results[name], indent=2).encode())
     source = f"{run_dir} (chunk {data.chunk})"
     recipes = results["claims"]["recipes"]
-    checkpoint.atomic_write_bytes(out / "table2.md", table2_markdown(results["table2"], recipes, source).encode())
-    checkpoint.atomic_write_bytes(out / "claims.md", claims.claims_markdown(results["claims"], source).encode())
-    checkpoint.atomic_write_bytes(out / "quality.md", quality_markdown(results["quality"], source).encode())
+    files.atomic_write_bytes(out / "table2.md", table2_markdown(results["table2"], recipes, source).encode())
+    files.atomic_write_bytes(out / "claims.md", claims.claims_markdown(results["claims"], source).encode())
+    files.atomic_write_bytes(out / "quality.md", quality_markdown(results["quality"], source).encode())
     figures.impedance(results["impedance"], results["gains"], data.learners, cfg).savefig(
         out / "impedance.png", dpi=110
     )
@@ -716,9 +718,9 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: dict, out: Path 
     figures.fig5(results["panels"], results["corners"][2], cfg).savefig(out / "fig5.png", dpi=110)
     figures.learning_curves(data.metrics, cfg).savefig(out / "learning_curves.png", dpi=110)
     if results["adaptation"] is not None:
-        checkpoint.atomic_write_bytes(out / "adaptation.json", json.dumps(results["adaptation"], indent=2).encode())
+        files.atomic_write_bytes(out / "adaptation.json", json.dumps(results["adaptation"], indent=2).encode())
         text = adaptation.markdown(results["adaptation"], source)
-        checkpoint.atomic_write_bytes(out / "adaptation.md", text.encode())
+        files.atomic_write_bytes(out / "adaptation.md", text.encode())
         figures.adaptation(results["adaptation"], cfg).savefig(out / "adaptation.png", dpi=110)
     return out
 

@@ -13,7 +13,8 @@ from matplotlib.patches import Rectangle
 
 from reach_jax import sensor, task
 from reach_jax.config import Config
-from reach_jax.episodes import OUTCOME_NAMES, SUCCESS
+from reach_jax.outcomes import NAMES as OUTCOME_NAMES
+from reach_jax.outcomes import SUCCESS
 from reach_jax.panels import CORNER_NAMES, FIG4_PANELS, FIG5_PANELS
 
 # Paper's Fig. 4 legend: upper left filled squares, lower left empty squares, upper right x, lower right

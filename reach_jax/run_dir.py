@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, trial_log
+from reach_jax import batch, checkpoint, files, trial_log
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config, first_difference, from_dict, to_dict, to_json
 
@@ -67,7 +67,7 @@ def create(run_dir: Path, cfg: Config) -> None:
     """Start a run directory: write config.json and drop any metrics of an earlier attempt."""
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    checkpoint.atomic_write_bytes(run_dir / CONFIG_FILE, to_json(cfg).encode())
+    files.atomic_write_bytes(run_dir / CONFIG_FILE, to_json(cfg).encode())
     (run_dir / METRICS_FILE).unlink(missing_ok=True)
     for name in trial_columns():
         (run_dir / TRIALS_DIR / f"{name}.bin").unlink(missing_ok=True)
@@ -105,7 +105,7 @@ def read_metrics(run_dir: Path, up_to_chunk: float = math.inf) -> list[dict]:
 
 def append_metrics(run_dir: Path, rows: list[dict]) -> None:
     """Append one line per row to metrics.jsonl."""
-    checkpoint.append_lines(Path(run_dir) / METRICS_FILE, [json.dumps(r) for r in rows])
+    files.append_lines(Path(run_dir) / METRICS_FILE, [json.dumps(r) for r in rows])
 
 
 def truncate_metrics(run_dir: Path, chunk: int) -> None:
@@ -122,7 +122,7 @@ def truncate_metrics(run_dir: Path, chunk: int) -> None:
         if row.get("chunk", math.inf) > chunk:
             break
         keep.append(line)
-    checkpoint.atomic_write_bytes(path, "".join(x + "\n" for x in keep).encode())
+    files.atomic_write_bytes(path, "".join(x + "\n" for x in keep).encode())
 
 
 def trial_columns() -> dict[str, str]:

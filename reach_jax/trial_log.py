@@ -12,12 +12,13 @@ from flax import struct
 
 from reach_jax import arm
 from reach_jax.config import Config
+from reach_jax.outcomes import FAIL, OUT, SUCCESS
 
 # Columns of a trial record, in order; the shell adds learner, trial and chunk (`run_dir.append_trials`).
 COLUMNS = (
     "block",  # protocol block the trial ran in
     "catch",  # 1 for a catch trial
-    "outcome",  # 0 goal, 1 out (joint limit), 2 cap
+    "outcome",  # outcomes.SUCCESS, OUT or FAIL (the cap)
     "duration_s",  # trial length [s]
     "perp_error_m",  # hand's signed distance from the aim at peak hand speed [m]
     "direction_error_rad",  # signed angle from the aim to the hand's displacement at train.direction_time [rad]
@@ -68,7 +69,7 @@ def advance(trace: TrialTrace, hand: jax.Array, hand_vel: jax.Array, t: jax.Arra
 
 def record(trace: TrialTrace, block, catch, goal, out, t, cfg: Config) -> jax.Array:
     """(len(COLUMNS),) float32 record of a trial that ended after t steps."""
-    outcome = jnp.where(goal, 0, jnp.where(out, 1, 2))
+    outcome = jnp.where(goal, SUCCESS, jnp.where(out, OUT, FAIL))
     values = (
         block,
         catch,

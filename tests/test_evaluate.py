@@ -14,7 +14,21 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from reach_jax import arm, batch, checkpoint, claims, cli, episodes, evaluate, network, panels, sensor, task, train
+from reach_jax import (
+    arm,
+    batch,
+    checkpoint,
+    claims,
+    cli,
+    episodes,
+    evaluate,
+    network,
+    outcomes,
+    panels,
+    sensor,
+    task,
+    train,
+)
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import CONDITIONS, Config, TrainConfig, to_json
 
@@ -109,7 +123,7 @@ def test_corner_pairs_join_the_four_corner_cell_centres():
 
 def test_pd_controller_succeeds_on_every_pair_in_both_tests():
     ep = run_policy(pd_policy, [PD_GAINS])
-    assert np.all(ep.outcome == episodes.SUCCESS)
+    assert np.all(ep.outcome == outcomes.SUCCESS)
     assert np.all(ep.steps < N_STEPS)
     starts, targets = evaluate.test_pairs(CFG)
     idx = ep.steps[..., None, None]
@@ -125,7 +139,7 @@ def test_pd_controller_succeeds_on_every_pair_in_both_tests():
 
 def test_controller_driving_a_joint_past_its_limit_is_out():
     ep = run_policy(limit_policy, [0.0])
-    assert np.all(ep.outcome == episodes.OUT)
+    assert np.all(ep.outcome == outcomes.OUT)
     assert np.all(ep.steps < N_STEPS)
     table = evaluate.count(ep.outcome, ep.steps, CFG)
     assert (table["success"], table["out"], table["fail"]) == (0, ep.outcome.size, 0)
@@ -134,7 +148,7 @@ def test_controller_driving_a_joint_past_its_limit_is_out():
 
 def test_zero_torque_fails_at_exactly_4_s():
     ep = run_policy(zero_policy, [0.0])
-    assert np.all(ep.outcome == episodes.FAIL)
+    assert np.all(ep.outcome == outcomes.FAIL)
     assert np.all(ep.steps == N_STEPS)
     assert np.all(evaluate.trial_times(ep.outcome, ep.steps, CFG) == 4.0)
     assert evaluate.count(ep.outcome, ep.steps, CFG)["mean_time_s"] == 4.0
@@ -164,7 +178,7 @@ def test_counts_are_per_pair_and_summed_over_a_conditions_networks():
 
 def test_mean_time_counts_out_and_fail_as_max_time():
     dt, cap = CFG.arm.dt, CFG.eval.max_time
-    outcome = np.array([episodes.SUCCESS, episodes.OUT, episodes.FAIL, episodes.SUCCESS])
+    outcome = np.array([outcomes.SUCCESS, outcomes.OUT, outcomes.FAIL, outcomes.SUCCESS])
     steps = np.array([10, 5, N_STEPS, 50])
     np.testing.assert_allclose(evaluate.trial_times(outcome, steps, CFG), [10 * dt, cap, cap, 50 * dt])
     got = evaluate.count(outcome, steps, CFG)
@@ -173,7 +187,7 @@ def test_mean_time_counts_out_and_fail_as_max_time():
 
     # Three networks, two learning conditions: rows sum the networks of a condition.
     out3 = np.broadcast_to(outcome, (3, 2, 4)).copy()
-    out3[2] = episodes.SUCCESS
+    out3[2] = outcomes.SUCCESS
     steps3 = np.broadcast_to(steps, (3, 2, 4))
     table = evaluate.table2(out3, steps3, [("none", 0), ("none", 1), ("viscous", 0)], [0, 0, 0], CFG)
     rows = {(r["learning"], r["test"]): r for r in table["rows"]}
@@ -217,7 +231,7 @@ def test_learning_condition_mask_reaches_the_policy():
         [task.make_condition("random", CFG).input_mask, task.make_condition("random_nopast", CFG).input_mask]
     )
     ep = run_policy(past_policy, [0.0, 0.0], masks=masks)
-    assert np.all(ep.outcome[1] == episodes.FAIL)  # no past inputs: no torque, no movement
+    assert np.all(ep.outcome[1] == outcomes.FAIL)  # no past inputs: no torque, no movement
     assert np.ptp(ep.hand[1], axis=-2).max() < 1e-6
     assert np.ptp(ep.hand[0], axis=-2).max() > 1e-3  # the same policy moves the arm when it sees them
 
@@ -273,7 +287,7 @@ def test_quality_measures_on_known_profiles():
 def test_minimum_jerk_yardstick_is_straight_single_peaked_and_reaches_every_target():
     starts, targets = evaluate.test_pairs(CFG)
     ep = evaluate.minimum_jerk_episodes(starts, targets, CFG)
-    assert np.all(ep.outcome == episodes.SUCCESS)
+    assert np.all(ep.outcome == outcomes.SUCCESS)
     q = evaluate.movement_quality(ep, starts, targets, CFG)
     assert q["successful"] == 1040
     assert q["straightness"]["mean"] < 1e-9

@@ -7,7 +7,7 @@ import dataclasses
 import jax
 import numpy as np
 
-from reach_jax import batch, episodes, evaluate, train
+from reach_jax import batch, episodes, evaluate, outcomes, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import Config, TrainConfig
 
@@ -29,7 +29,7 @@ def _near_successes(group, starts, targets) -> np.ndarray:
             CFG,
         )
     )
-    return np.sum(ep.outcome[:, 0] == episodes.SUCCESS, axis=-1)
+    return np.sum(ep.outcome[:, 0] == outcomes.SUCCESS, axis=-1)
 
 
 def test_a_short_run_learns_to_reach_nearby_targets(tmp_path):

@@ -1,4 +1,4 @@
-"""The jitted JAX model against the plain-NumPy oracle (reach_jax.reference), in float64.
+"""The jitted JAX model against the plain-NumPy oracle (reach_jax.testing.reference), in float64.
 
 Everything runs inside `jax.enable_x64(True)`, so float32 rounding cannot hide a mistake: the two sides differ
 only by float64 rounding (eps = 2.2e-16) in a different order of operations. A wrong term, sign, index or
@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 from conftest import default_hyper
 
-from reach_jax import arm, encoding, env, fields, learner, network, protocol, reference, rollout, sensor, task
+from reach_jax import arm, encoding, env, fields, learner, network, protocol, rollout, sensor, task
 from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_dict
+from reach_jax.testing import reference
 
 CFG = Config()
 N_SAMPLES = 8  # random draws per comparison: enough to hit every branch, few enough to stay fast
