@@ -4,7 +4,8 @@ The paper says only that rnd is a random number. Our reading is rnd ~ U(-b, b) p
 per-learner hyperparameter (`hyper.TABLE`). The optional forms below are off at their neutral values, where
 the noise is b (2u - 1) exactly as before they existed:
 - an anneal of b once the curriculum has reached the whole field (`schedule`);
-- b scaled by the critic's value, smallest where it expects the goal (`value_scale`);
+- b scaled by the critic's value, smallest where it expects the goal, from the start or from the first full
+  field (`value_scale`);
 - trials without noise, the correlated share included (`quiet`);
 - AR(1) noise correlated from step to step, with the stationary spread of the white noise (`noise`).
 """
@@ -33,14 +34,16 @@ def schedule(h: Hyper, trials: jax.Array, full_at: jax.Array) -> jax.Array:
     return h.noise * (1.0 + (h.noise_final_ratio - 1.0) * frac)
 
 
-def value_scale(h: Hyper, p: jax.Array) -> jax.Array:
+def value_scale(h: Hyper, p: jax.Array, full_at: jax.Array) -> jax.Array:
     """() factor in [noise_value_ratio, 1] on the bound at a state whose critic value is p.
 
     1 where p <= noise_value_lo (far from the goal, or failing), noise_value_ratio where p >= noise_value_hi
-    (the critic expects the goal soon), linear between.
+    (the critic expects the goal soon), linear between; 1 everywhere before the curriculum first reached the
+    whole field (full_at < 0) when noise_value_after_full is on.
     """
+    ratio = jnp.where((h.noise_value_after_full > 0) & (full_at < 0), 1.0, h.noise_value_ratio)
     far = jnp.clip((h.noise_value_hi - p) / (h.noise_value_hi - h.noise_value_lo), 0.0, 1.0)
-    return h.noise_value_ratio + (1.0 - h.noise_value_ratio) * far
+    return ratio + (1.0 - ratio) * far
 
 
 def quiet(h: Hyper, trials: jax.Array) -> jax.Array:
@@ -64,5 +67,5 @@ def noise(unit: jax.Array, h: Hyper, trials: jax.Array, full_at: jax.Array, p: j
       prev: (2,) the previous step's rnd (0 at the start of training).
     """
     silent = quiet(h, trials)
-    b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * value_scale(h, p))
+    b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * value_scale(h, p, full_at))
     return jnp.where(silent, 0.0, h.noise_corr * prev), jnp.sqrt(1.0 - h.noise_corr**2) * b * unit

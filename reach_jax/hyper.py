@@ -77,6 +77,13 @@ TABLE = (
         "noise_value_lo", 0.0, "critic value p at or below which the bound is whole (model §5 choice)", neutral=0.0
     ),
     Hyperparameter(
+        "noise_value_after_full",
+        0.0,
+        "1: the value scaling starts once the curriculum has first reached the whole field (model §5 choice)",
+        high=1.0,
+        neutral=0.0,
+    ),
+    Hyperparameter(
         "noise_corr",
         0.0,
         "step-to-step correlation of rnd, AR(1) with the spread kept; 0 = white (model §5 choice)",

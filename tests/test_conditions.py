@@ -57,6 +57,7 @@ def test_bad_conditions_are_one_line_errors_with_nothing_written(setting, messag
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_a_fifth_condition_trains_and_evaluates_from_a_config_file(tmp_path):
     spec = {
         "conditions": {"curl": {"viscous": CURL}},

@@ -6,6 +6,7 @@ import dataclasses
 
 import jax
 import numpy as np
+import pytest
 
 from reach_jax import batch, episodes, evaluate, outcomes, train
 from reach_jax import run_dir as run_dir_io
@@ -32,6 +33,7 @@ def _near_successes(group, starts, targets) -> np.ndarray:
     return np.sum(ep.outcome[:, 0] == outcomes.SUCCESS, axis=-1)
 
 
+@pytest.mark.slow
 def test_a_short_run_learns_to_reach_nearby_targets(tmp_path):
     starts, targets = evaluate.test_pairs(CFG)
     # Test pairs inside the initial curriculum box (1.6 cells), where this much training takes place.

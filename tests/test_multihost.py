@@ -81,6 +81,7 @@ def metrics_without_wall(run_dir: Path) -> list[dict]:
     return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
 
 
+@pytest.mark.slow
 def test_two_processes_train_exactly_like_one_process_with_two_devices(tmp_path):
     # Through a fresh start, a SIGKILL of process 1 and a resume, which a run must survive anyway; the reference
     # is the same command in one process with two CPU devices.

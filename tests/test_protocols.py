@@ -122,6 +122,7 @@ def protocol_argv(tmp_path):
     ]
 
 
+@pytest.mark.slow
 def test_a_two_block_protocol_resumes_bit_identically_after_sigkill(tmp_path, train_until_killed):
     argv = protocol_argv(tmp_path)
     whole = tmp_path / "whole"
@@ -145,6 +146,7 @@ def test_a_two_block_protocol_resumes_bit_identically_after_sigkill(tmp_path, tr
     assert expected["catch"][expected["block"] == 0].sum() == 0 < expected["catch"][expected["block"] == 1].sum()
 
 
+@pytest.mark.slow
 def test_networks_start_from_another_run_and_a_missing_one_is_a_one_line_error(tmp_path, capsys):
     source = tmp_path / "source"
     argv = ["--trials", "30", "--seeds", "2", "--conditions", "none,random", "--chunk-steps", "300", "--quiet"]
@@ -276,6 +278,7 @@ def test_field_sign_points_along_the_push():
     np.testing.assert_array_equal(adaptation.field_sign(aim, viscous), np.sign(left))
 
 
+@pytest.mark.slow
 def test_a_protocol_run_evaluates_into_adaptation_files(tmp_path):
     out = tmp_path / "run"
     assert (

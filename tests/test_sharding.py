@@ -10,6 +10,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pytest
 
 from reach_jax import checkpoint
 
@@ -24,6 +25,7 @@ def _run(code: str) -> str:
     return proc.stdout
 
 
+@pytest.mark.slow
 def test_sharded_chunk_equals_unsharded():
     out = _run(
         f"""
@@ -54,6 +56,7 @@ def test_sharded_chunk_equals_unsharded():
     assert out.strip().endswith("identical")
 
 
+@pytest.mark.slow
 def test_cli_devices_flag_gives_the_same_run(tmp_path):
     argv = ["--trials", "30", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300", "--quiet"]
     for devices in (1, N_DEVICES):

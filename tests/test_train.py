@@ -205,9 +205,12 @@ def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():
     h = default_hyper(CFG)._replace(
         noise_value_ratio=jnp.asarray(0.25), noise_value_hi=jnp.asarray(0.3), noise_value_lo=jnp.asarray(0.1)
     )
-    scale = jax.jit(lambda p: exploration.value_scale(h, p))
+    scale = jax.jit(lambda p, full_at, h=h: exploration.value_scale(h, p, full_at))
     for p, want in ((-0.4, 1.0), (0.1, 1.0), (0.2, 0.625), (0.3, 0.25), (0.45, 0.25)):
-        assert float(scale(p)) == pytest.approx(want, abs=1e-6), p
+        assert float(scale(p, -1)) == pytest.approx(want, abs=1e-6), p
+    # From the first full field only: the whole bound before it, scaled after it.
+    after = h._replace(noise_value_after_full=jnp.asarray(1.0))
+    assert float(scale(0.45, -1, after)) == 1.0 and float(scale(0.45, 30, after)) == pytest.approx(0.25)
     quiet = jax.jit(lambda t, k: exploration.quiet(h._replace(quiet_every=jnp.asarray(k)), t))
     assert [bool(quiet(t, 3.0)) for t in range(7)] == [False, False, True, False, False, True, False]
     assert not any(bool(quiet(t, 0.0)) for t in range(7))
@@ -312,6 +315,7 @@ def test_matvec2_rounds_as_the_dot_it_replaced():
     np.testing.assert_array_equal(np.asarray(fused), np.asarray(dot))
 
 
+@pytest.mark.slow
 def test_batched_chunk_matches_pure_single_learner_train():
     cfg = tiny(conditions=("none", "viscous", "random", "random_nopast"), seeds=2)
     n_steps = 60
@@ -329,6 +333,7 @@ def test_batched_chunk_matches_pure_single_learner_train():
     assert max(moved) > 0
 
 
+@pytest.mark.slow
 def test_padded_hidden_units_stay_inert_and_change_nothing():
     cfg = tiny(conditions=("viscous", "random"))
     group = batch.init_batch(cfg)
@@ -386,9 +391,14 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         ["--hidden-pad", "0"],
         ["--hidden-pad", "1000"],
         ["--conditions", "none,sideways"],
-        ["--noise-final-ratio", "0"],
+        ["--noise-final-ratio", "-0.5"],
         ["--noise-anneal-delay", "-1"],
-        ["--noise-anneal-trials", "0,1000"],
+        ["--noise-anneal-trials", "-5,1000"],
+        ["--noise-value-ratio", "1.5"],
+        ["--noise-corr", "1"],
+        ["--actor-baseline", "0,2"],
+        ["--quiet-every", "-1"],
+        ["--noise-value-lo", "0.4"],
         ["--keep-every", "-2"],
         ["--out", str(a_file)],
         ["--out", str(a_file / "sub")],
@@ -465,6 +475,7 @@ def test_chunk_members_shrink_to_the_unfinished_learners():
     assert len(train.chunk_members(np.full(5, 10), 10)) == 0
 
 
+@pytest.mark.slow
 def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
     # Learners finish their trials in different chunks, so the batch shrinks in the tail; each learner must end
     # exactly as it does when trained alone.

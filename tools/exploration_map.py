@@ -3,6 +3,8 @@
     python tools/exploration_map.py runs/heldout runs/table2 runs/dev_anneal runs/dev_gradual runs/dev_delayed \
         runs/screen --out runs/exploration_map
 
+Writes OUT.md (the table), OUT.json (its rows) and OUT.png (the figure).
+
 Per recipe of each run: the exploration it used, the learned hand damping along the viscous field's unstable
 axis (no field) of each learning condition, the none -> viscous cell, the after-effect, the field's cost to
 random-force and no-past networks, and how many learners stayed at the whole field late in training. The
@@ -82,6 +84,21 @@ def recipe_rows(run: Path) -> list[dict]:
     return rows
 
 
+def screen(rows: list[dict]) -> list[dict]:
+    """The screening rule fixed before the search (README, second round): a recipe passes when its no-field
+    networks' mean damping along the unstable axis is below the field's 15.9 N s/m and every learner was judged
+    and stayed at the whole field; those that pass rank by lower none -> viscous success. Returns the rows with
+    "passes" and "rank" (1 = best; None for a recipe that fails)."""
+    for r in rows:
+        compliant = r["damping"].get("none") is not None and r["damping"]["none"] < FIELD_UNSTABLE
+        stable = r["judged"] > 0 and r["stable"] == r["judged"]
+        r["passes"] = bool(compliant and stable and r["none_viscous_success"] is not None)
+    passing = sorted((r for r in rows if r["passes"]), key=lambda r: r["none_viscous_success"])
+    for r in rows:
+        r["rank"] = passing.index(r) + 1 if r["passes"] else None
+    return rows
+
+
 def _pct(x: float | None) -> str:
     return "–" if x is None else f"{100 * x:.0f}"
 
@@ -100,10 +117,13 @@ def markdown(rows: list[dict], command: str) -> str:
         " pushes there at +15.9). none → viscous: success / out % per network (paper 55 / 45). After-effect:"
         " viscous → none minus viscous → viscous, success points and time ratio (paper −8.0, 1.70×). Field cost:"
         " success under the field minus without it, points, of none / random / random_nopast networks (paper −44.8"
-        " / −9.8 / −34.7). Stable: learners that stayed at the whole field in their last 20% of trials.",
+        " / −9.8 / −34.7). Stable: learners that stayed at the whole field in their last 20% of trials. Screen:"
+        " the screening rule (damping of the none networks below 15.9 and every learner stable), with the rank of"
+        " those that pass by lower none → viscous success.",
         "",
-        "| run | recipe | exploration | seeds | damping | none → viscous | after-effect | field cost | stable |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| run | recipe | exploration | seeds | damping | none → viscous | after-effect | field cost | stable"
+        " | screen |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         damping = " / ".join(_num(r["damping"].get(c)) for c in ("none", "random", "random_nopast"))
@@ -113,7 +133,7 @@ def markdown(rows: list[dict], command: str) -> str:
         lines.append(
             f"| `{r['run']}` | {r['recipe']} | {r['exploration']} | {r['networks']} | {damping} | "
             f"{_pct(r['none_viscous_success'])} / {_pct(r['none_viscous_out'])} | {after} | {cost} | "
-            f"{r['stable']}/{r['judged']} |"
+            f"{r['stable']}/{r['judged']} | {'pass, rank ' + str(r['rank']) if r['passes'] else 'no'} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -164,10 +184,11 @@ def main() -> None:
     p.add_argument("runs", nargs="+", type=Path)
     p.add_argument("--out", type=Path, required=True, help="writes OUT.md and OUT.png")
     args = p.parse_args()
-    rows = [r for run in args.runs for r in recipe_rows(run)]
+    rows = screen([r for run in args.runs for r in recipe_rows(run)])
     command = "python tools/exploration_map.py " + " ".join(str(r) for r in args.runs) + f" --out {args.out}"
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".md").write_text(markdown(rows, command))
+    args.out.with_suffix(".json").write_text(json.dumps(rows, indent=1) + "\n")
     figure(rows).savefig(args.out.with_suffix(".png"), dpi=110)
     print(markdown(rows, command))
 

@@ -480,14 +480,16 @@ def update_n_max(n_max: float, n_steps: int, lam: float) -> float:
     return lam * n_max
 
 
-def exploration_noise(unit, bound: float, p: float, prev, trials: int, h: dict) -> np.ndarray:
+def exploration_noise(unit, bound: float, p: float, prev, trials: int, was_full: bool, h: dict) -> np.ndarray:
     """rnd (2,) of one step (model §5): the bound scaled by the critic's value, none on quiet trials, AR(1).
 
     Args: unit (2,) draws in [-1, 1), bound () the schedule's bound, p () the critic's value of the step's input,
-      prev (2,) the previous step's rnd, trials () trials ended before this one, h the learner's hyperparameters.
+      prev (2,) the previous step's rnd, trials () trials ended before this one, was_full () the curriculum has
+      reached the whole field, h the learner's hyperparameters.
     """
     far = min(1.0, max(0.0, (h["noise_value_hi"] - p) / (h["noise_value_hi"] - h["noise_value_lo"])))
-    b = bound * (h["noise_value_ratio"] + (1.0 - h["noise_value_ratio"]) * far)
+    ratio = 1.0 if h["noise_value_after_full"] > 0 and not was_full else h["noise_value_ratio"]
+    b = bound * (ratio + (1.0 - ratio) * far)
     every = h["quiet_every"]
     if every > 0 and (trials + 1) % every == 0:
         return np.zeros(2)  # a quiet trial: no noise at all
@@ -753,7 +755,7 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     x = observe(lrn.arm, lrn.prev_arm, lrn.prev_tau, lrn.target, cond.input_mask, cfg)
     lr = h["lr"] if lrn.pending_learning else 0.0
     layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg, h["actor_baseline"])
-    rnd = exploration_noise(unit, bound, out[0], lrn.pending.rnd, lrn.trials, h)
+    rnd = exploration_noise(unit, bound, out[0], lrn.pending.rnd, lrn.trials, lrn.was_full, h)
     tau = torque(out[1:], rnd, cfg)
     moved = arm_step(lrn.arm, tau, cond.field, lrn.force, cfg.arm)
     t = lrn.t + 1

@@ -7,7 +7,6 @@ checks that every learner is still finite. Units: trials, steps (of cfg.arm.dt s
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -262,9 +261,3 @@ def run(
         bar.update(total, "done", force=True)
         bar.close()
     return run_dir
-
-
-if __name__ == "__main__":
-    from reach_jax import cli
-
-    sys.exit(cli.train_main())

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import jax
@@ -736,9 +735,3 @@ def evaluate(run_dir: Path, checkpoint_path: Path | None = None, out: Path | Non
     results = evaluate_run(run)
     write_results(run_dir, run, results, out)
     return {name: results[name] for name in (*RESULT_FILES, "adaptation")}
-
-
-if __name__ == "__main__":
-    from reach_jax import cli
-
-    sys.exit(cli.evaluate_main())
