@@ -35,9 +35,11 @@ def describe(h: dict) -> str:
     else:
         start = f"{h['noise_anneal_delay'] / 1e3:g}k after" if h["noise_anneal_delay"] else "from"
         text = f"{noise:g} → {noise * ratio:.2g} over {h['noise_anneal_trials'] / 1e6:g}M, {start} full"
-    if "noise_value_ratio" in h or "noise_value_hi" in h or "noise_value_lo" in h:
+    if any(k.startswith("noise_value") for k in h):
         r = h.get("noise_value_ratio", 1.0)
         text += f"; ×{r:g} near the goal (p {h.get('noise_value_lo', 0.0):g}→{h.get('noise_value_hi', 0.3):g})"
+        if h.get("noise_value_after_full"):
+            text += " once full"
     if "noise_corr" in h:
         text += f"; AR ρ {h['noise_corr']:g}"
     if "quiet_every" in h:
