@@ -56,6 +56,8 @@ def _mean(cell: dict | None, name: str) -> float | None:
 def recipe_rows(run: Path) -> list[dict]:
     """One record per recipe of a run, from its eval/claims.json."""
     data = json.loads((run / "eval" / "claims.json").read_text())
+    table = json.loads((run / "eval" / "table2.json").read_text())
+    learning = {r["learner"]: r["learning"] for r in table["per_network"]}
     rows = []
     for k, recipe in enumerate(data["recipes"]):
         cells = {(c["learning"], c["test"]): c for c in recipe["cells"]}
@@ -67,6 +69,7 @@ def recipe_rows(run: Path) -> list[dict]:
 
         after = {c["claim"]: c for c in recipe["claims"]}.get(3)
         judged = [p for p in recipe["curriculum"]["learners"] if p["tail_chunks"]]
+        forced = [p for p in judged if learning[p["learner"]].startswith("random")]
         rows.append(
             {
                 "run": str(run),
@@ -81,6 +84,8 @@ def recipe_rows(run: Path) -> list[dict]:
                 "field_cost": {c: drop(c) for c in ("none", "random", "random_nopast")},
                 "stable": sum(p["stable"] for p in judged),
                 "judged": len(judged),
+                "stable_random": sum(p["stable"] for p in forced),
+                "judged_random": len(forced),
             }
         )
     return rows
@@ -140,24 +145,23 @@ def markdown(rows: list[dict], command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _stable_share(r: dict) -> float | None:
-    return r["stable"] / r["judged"] if r["judged"] else None
+def _stable_share(r: dict, forced: bool) -> float | None:
+    """The share of a recipe's judged learners, with random forces or without, that stayed at the whole field."""
+    judged = r["judged_random"] if forced else r["judged"] - r["judged_random"]
+    stable = r["stable_random"] if forced else r["stable"] - r["stable_random"]
+    return stable / judged if judged else None
 
 
 def figure(rows: list[dict]):
-    """Three panels against the no-field networks' damping: none -> viscous success, stability, random's damping."""
+    """Three panels against the no-field networks' damping: none -> viscous success, the random-force learners'
+    stability, their damping. Filled: every no-field learner of the recipe stable; open: not."""
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
     points = [r for r in rows if r["damping"].get("none") is not None]
     runs = sorted({r["run"] for r in points})
     colours = {run: plt.cm.tab10(i % 10) for i, run in enumerate(runs)}
     panels = (
         ("none → viscous success [%]", lambda r: r["none_viscous_success"], 100.0, 100 * PAPER_NONE_VISCOUS),
-        (
-            "learners stable late in training [%]",
-            lambda r: r["stable"] / r["judged"] if r["judged"] else None,
-            100,
-            None,
-        ),
+        ("random-force learners stable late in training [%]", lambda r: _stable_share(r, True), 100.0, None),
         ("random-force networks' damping [N s/m]", lambda r: r["damping"].get("random"), 1.0, None),
     )
     for ax, (label, value, scale, paper) in zip(axes, panels, strict=True):
@@ -165,7 +169,9 @@ def figure(rows: list[dict]):
             y = value(r)
             if y is None:
                 continue
-            ax.scatter(r["damping"]["none"], scale * y, color=colours[r["run"]], s=28, zorder=3)
+            calm = _stable_share(r, False) == 1.0
+            face = colours[r["run"]] if calm else "none"
+            ax.scatter(r["damping"]["none"], scale * y, facecolors=face, edgecolors=colours[r["run"]], s=30, zorder=3)
         ax.axvline(FIELD_UNSTABLE, color="0.5", ls="--", lw=1)
         if paper is not None:
             ax.axhline(paper, color="tab:red", ls=":", lw=1)
@@ -175,7 +181,7 @@ def figure(rows: list[dict]):
     for run in runs:
         axes[0].scatter([], [], color=colours[run], label=run.replace("runs/", ""))
     axes[0].legend(fontsize=7, loc="lower right")
-    axes[0].text(FIELD_UNSTABLE, 2, " field +15.9", fontsize=7, color="0.4")
+    axes[0].text(FIELD_UNSTABLE, 0.02, " field +15.9", fontsize=7, color="0.4", transform=axes[0].get_xaxis_transform())
     fig.suptitle("Exploration: a compliant arm against stable learning (one point per recipe)", fontsize=10)
     fig.tight_layout()
     return fig
