@@ -60,6 +60,16 @@ def verdicts(cells: dict, after=AFTER_PAPER) -> dict:
     return {c["claim"]: c for c in result}
 
 
+def coverage(interval, draw, truth: float, rounds: int = 2000) -> float:
+    """The share of `rounds` intervals, each from a sample `draw(rng)`, that contain `truth`."""
+    rng = np.random.default_rng(0)
+    inside = 0
+    for _ in range(rounds):
+        ci = interval(draw(rng))
+        inside += ci["low"] <= truth <= ci["high"]
+    return inside / rounds
+
+
 def test_t_quantiles_and_intervals():
     # Textbook two-sided 95% values of Student's t.
     for df, value in [(1, 12.706), (2, 4.303), (7, 2.365), (30, 2.042)]:
@@ -75,12 +85,7 @@ def test_t_quantiles_and_intervals():
     assert stats.ratio_ci([2, 2, 2], [1, 1, 1])["mean"] == pytest.approx(2.0)
     assert stats.ratio_ci([2, 4, 8], [1, 1, 1])["mean"] == pytest.approx(4.0)  # geometric mean
     # Coverage: about 95% of intervals from normal samples of 8 contain the true mean.
-    rng = np.random.default_rng(0)
-    inside = 0
-    for _ in range(2000):
-        ci = stats.mean_ci(rng.normal(1.0, 2.0, 8))
-        inside += ci["low"] <= 1.0 <= ci["high"]
-    assert 0.93 < inside / 2000 < 0.97
+    assert 0.93 < coverage(stats.mean_ci, lambda rng: rng.normal(1.0, 2.0, 8), 1.0) < 0.97
 
 
 def test_rate_intervals_stay_inside_0_1_and_cover():
@@ -99,12 +104,7 @@ def test_rate_intervals_stay_inside_0_1_and_cover():
     assert stats.rate_ci([0.0, 0.0, 0.0])["low"] == stats.rate_ci([0.0, 0.0, 0.0])["high"] == 0.0
     assert stats.rate_ci([1.0, 1.0])["low"] == 1.0 and stats.rate_ci([0.3])["low"] is None
     # Coverage of the mean of 8 networks' rates drawn around 0.95 (beta-distributed): close to the nominal 95%.
-    rng = np.random.default_rng(1)
-    inside = 0
-    for _ in range(2000):
-        ci = stats.rate_ci(rng.beta(19.0, 1.0, 8))
-        inside += ci["low"] <= 0.95 <= ci["high"]
-    assert 0.92 < inside / 2000 < 0.98
+    assert 0.92 < coverage(stats.rate_ci, lambda rng: rng.beta(19.0, 1.0, 8), 0.95) < 0.98
 
 
 def test_paper_numbers_make_every_claim_hold_and_every_cell_near():
