@@ -36,12 +36,11 @@ def make_train(cfg: Config, n_steps: int):
     return train
 
 
-@jax.jit
-def finite_learners(states: rollout.LearnerState) -> jax.Array:
-    """(L,) bool: every parameter and arm value of the learner is finite."""
+def finite_learners(states: rollout.LearnerState) -> np.ndarray:
+    """(L,) bool: every parameter and arm value of the learner is finite (on the host copy the shell holds)."""
     leaves = jax.tree.leaves((states.agent.params, states.env.arm, states.agent.n_max))
-    per_leaf = [jnp.all(jnp.isfinite(x.reshape(x.shape[0], -1)), axis=1) for x in leaves]
-    return jnp.all(jnp.stack(per_leaf), axis=0)
+    per_leaf = [np.isfinite(np.asarray(x).reshape(len(x), -1)).all(axis=1) for x in leaves]
+    return np.all(per_leaf, axis=0)
 
 
 def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, cfg: Config) -> list[dict]:
@@ -230,7 +229,7 @@ def run(
         records = None if log is None else trial_records(distribute.to_host(log), members, chunk + 1)
         ran = len(members)
         chunk += 1
-        ok = np.asarray(finite_learners(states))
+        ok = finite_learners(states)
         # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk.
         if ok.all() and unfinished(states):
             following = chunk_members(np.asarray(states.counters.trials), cfg.train.trials)
