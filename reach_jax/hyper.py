@@ -99,6 +99,13 @@ TABLE = (
         neutral=0.0,
     ),
     Hyperparameter(
+        "drift_neutral_early",
+        0.0,
+        "1: a drift-aided success leaves the curriculum unchanged before the first full field too (model §5 choice)",
+        high=1.0,
+        neutral=0.0,
+    ),
+    Hyperparameter(
         "quiet_every",
         0,
         "every n-th trial runs without exploration; 0 = never (model §5 choice)",

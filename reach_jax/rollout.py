@@ -233,7 +233,9 @@ def learner_step(
     # If the trial ended, a new one starts, with the curriculum and N_max updated by the one that ended.
     n_max = jnp.where(goal, learner.update_n_max(agent.n_max, cont.t, hyper.lam), agent.n_max)
     was_full = cur.full_at >= 0
-    distance = jnp.where(done, task.update_curriculum(cur.distance, goal, trial.drifted, was_full, cfg), cur.distance)
+    early = hyper.drift_neutral_early > 0
+    grown = task.update_curriculum(cur.distance, goal, trial.drifted, was_full, cfg, early)
+    distance = jnp.where(done, grown, cur.distance)
     first_full = ~was_full & (distance >= task.curriculum_bounds(cfg)[1])
     full_at = jnp.where(first_full, counters.trials + done, cur.full_at)
     new_cond, new_block = protocol.trial_condition(plan, counters.trials + done, draws.catch)

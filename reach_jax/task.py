@@ -123,13 +123,19 @@ def curriculum_bounds(cfg: Config) -> tuple[float, float]:
 
 
 def update_curriculum(
-    distance: jax.Array, goal: jax.Array, drifted: jax.Array, was_full: jax.Array, cfg: Config
+    distance: jax.Array,
+    goal: jax.Array,
+    drifted: jax.Array,
+    was_full: jax.Array,
+    cfg: Config,
+    early: jax.Array = False,
 ) -> jax.Array:
     """Staircase after a trial: grow after a success without drift, shrink after an out or a cap.
 
     A drift-aided success also shrinks it, except once the curriculum has been full and
-    cfg.task.drift_neutral_when_full is set: then it leaves the distance unchanged. A learner that needs the
-    drift for some trials (a strong random force, little exploration noise) keeps the whole field.
+    cfg.task.drift_neutral_when_full is set, or at any time when `early` is (hyper `drift_neutral_early`): then it
+    leaves the distance unchanged. A learner that needs the drift for some trials (a strong random force, little
+    exploration noise) keeps the whole field.
 
     Args:
       distance: () curriculum distance [m].
@@ -137,9 +143,10 @@ def update_curriculum(
       drifted: () bool, the target drifted during the trial.
       was_full: () bool, the distance has reached the whole field at some earlier trial.
       cfg: model config.
+      early: () bool, a drift-aided success is neutral before the first full field too.
     """
     lo, hi = curriculum_bounds(cfg)
-    neutral = goal & drifted & was_full & cfg.task.drift_neutral_when_full
+    neutral = goal & drifted & ((was_full & cfg.task.drift_neutral_when_full) | early)
     step = jnp.where(goal & ~drifted, cfg.task.curriculum_step, jnp.where(neutral, 0.0, -cfg.task.curriculum_step))
     return jnp.clip(distance + step, lo, hi)
 

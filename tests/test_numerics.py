@@ -467,13 +467,18 @@ def test_n_max_and_curriculum_match_oracle():
     for n_max, n_steps in [(100.0, 150), (100.0, 99), (100.0, 100), (10.0, 3)]:
         got = float(upd(jnp.asarray(n_max), jnp.asarray(n_steps, jnp.int32)))
         assert got == pytest.approx(reference.update_n_max(n_max, n_steps, lam), rel=1e-15)
-    cur = jax.jit(lambda d, *flags: task.update_curriculum(d, *flags, CFG))
+    cur = jax.jit(lambda d, g, dr, full, early: task.update_curriculum(d, g, dr, full, CFG, early))
     lo, hi = reference.curriculum_bounds(CFG)
     for d in (lo, 0.5 * (lo + hi), hi):
-        for flags in itertools.product((True, False), repeat=3):
+        for goal, drifted, full, early in itertools.product((True, False), repeat=4):
+            flags = (goal, drifted, full, early)
             assert float(cur(jnp.asarray(d), *map(jnp.asarray, flags))) == pytest.approx(
-                reference.update_curriculum(d, *flags, CFG), abs=1e-15
+                reference.update_curriculum(d, goal, drifted, full, CFG, early), abs=1e-15
             )
+    # A drift-aided success: neutral once the field was full, or at any time with `early`; else it shrinks.
+    mid = 0.5 * (lo + hi)
+    assert reference.update_curriculum(mid, True, True, False, CFG) < mid
+    assert reference.update_curriculum(mid, True, True, False, CFG, early=True) == mid
 
 
 def test_trial_placement_and_drift_match_oracle():
@@ -545,6 +550,7 @@ EXPLORATION_FORMS = {
     "noise_corr": 0.8,
     "actor_baseline": 1.0,
     "quiet_every": 2,
+    "drift_neutral_early": 1.0,
 }
 
 

@@ -612,17 +612,19 @@ def drift_target(target, hand, step_in_trial: int, cfg: Config):
     return target + gap * (cfg.task.drift_per_step / dist), True
 
 
-def update_curriculum(distance: float, goal: bool, drifted: bool, was_full: bool, cfg: Config) -> float:
+def update_curriculum(
+    distance: float, goal: bool, drifted: bool, was_full: bool, cfg: Config, early: bool = False
+) -> float:
     """Staircase: +step after a success without drift, 0 after a drift-aided success once the curriculum
-    has been full (if cfg.task.drift_neutral_when_full), -step otherwise; kept in bounds.
+    has been full (if cfg.task.drift_neutral_when_full) or at any time (if `early`), -step otherwise; in bounds.
 
-    Args: distance () [m], goal, drifted, was_full.
+    Args: distance () [m], goal, drifted, was_full, early.
     Returns: () [m].
     """
     lo, hi = curriculum_bounds(cfg)
     if goal and not drifted:
         step = cfg.task.curriculum_step
-    elif goal and was_full and cfg.task.drift_neutral_when_full:
+    elif goal and ((was_full and cfg.task.drift_neutral_when_full) or early):
         step = 0.0
     else:
         step = -cfg.task.curriculum_step
@@ -773,7 +775,8 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     if goal:
         new.n_max = update_n_max(lrn.n_max, t, h["lam"])
     if done:
-        new.distance = update_curriculum(lrn.distance, goal, lrn.drifted, lrn.was_full, cfg)
+        early = h["drift_neutral_early"] > 0
+        new.distance = update_curriculum(lrn.distance, goal, lrn.drifted, lrn.was_full, cfg, early)
         new.was_full = lrn.was_full or new.distance >= curriculum_bounds(cfg)[1]
         new.cond, new.learning = trial_condition(plan, lrn.trials + 1, draws.catch)
         start, target, force = place_trial(draws, new.distance, new.cond.field, cfg)
