@@ -44,6 +44,8 @@ def describe(h: dict) -> str:
         text += f"; AR ρ {h['noise_corr']:g}"
     if "quiet_every" in h:
         text += f"; quiet 1/{h['quiet_every']:g}"
+    if "drift_neutral_early" in h:
+        text += "; drift neutral from the start"
     if "actor_baseline" in h:
         text += f"; actor baseline {h['actor_baseline']:g}"
     return text
