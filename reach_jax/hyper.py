@@ -44,6 +44,8 @@ class Hyperparameter:
         """Why `value` is out of range, or None when it is allowed."""
         too_low = value <= self.low if self.low_open else value < self.low
         too_high = value >= self.high if self.high_open else value > self.high
+        if self.integer and math.isfinite(value) and value != int(value):
+            return "must be a whole number"
         if math.isfinite(value) and not too_low and not too_high:
             return None
         if self.high == math.inf:

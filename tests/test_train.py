@@ -398,6 +398,7 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         ["--noise-corr", "1"],
         ["--actor-baseline", "0,2"],
         ["--quiet-every", "-1"],
+        ["--quiet-every", "2.5"],
         ["--noise-value-lo", "0.4"],
         ["--keep-every", "-2"],
         ["--out", str(a_file)],
