@@ -27,7 +27,6 @@ from reach_jax import (
     task,
     train,
 )
-from reach_jax import hyper as hyper_lib
 from reach_jax import run_dir as run_dir_io
 from reach_jax.config import (
     CONDITIONS,
@@ -198,7 +197,6 @@ def test_exploration_forms_at_their_neutral_values_are_white_noise_bit_for_bit()
     )
     assert not np.any(np.asarray(carried))
     np.testing.assert_array_equal(np.asarray(fresh), np.asarray(h.noise * unit))
-    assert all(n in hyper_lib.NAMES for n in ("noise_value_ratio", "noise_corr", "actor_baseline", "quiet_every"))
 
 
 def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():

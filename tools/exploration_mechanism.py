@@ -95,7 +95,8 @@ def actor_signal(run: Path, condition: str, n_states: int, samples: int, bounds,
 
     def lookahead(state, params, n_max, key):
         cond = state.cond
-        p_now, m = (lambda o: (o[0], o[1:]))(network.apply(params, env.observe(state.env, cond, cfg), cfg))
+        out = network.apply(params, env.observe(state.env, cond, cfg), cfg)
+        p_now, m = out[0], out[1:]
         cost = cfg.learner.p_range / n_max
 
         def signal(rnd):
