@@ -22,6 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from reach_jax import chunk as chunk_lib
 from reach_jax import distribute
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -78,12 +79,11 @@ def main(argv=None) -> int:
         import jax
         import jax.numpy as jnp
 
-        from reach_jax import rollout
         from reach_jax.config import Config
 
         cfg = Config()
         learners = throughput.batch_of(args.learners, cfg)
-        chunk = rollout.make_chunk(cfg, STEPS, jax.devices()[:1])
+        chunk = chunk_lib.make_chunk(cfg, STEPS, jax.devices()[:1])
         budget = jnp.asarray(2**31 - 1, jnp.int32)
         jax.block_until_ready(chunk(learners.states, learners.plans, learners.hypers, budget))
         modules = list(Path(dump).glob("*jit_chunk*cpu_after_optimizations.txt"))

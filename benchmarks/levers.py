@@ -27,7 +27,8 @@ import sys
 import time
 from pathlib import Path
 
-from reach_jax import distribute, rollout
+from reach_jax import distribute
+from reach_jax.speed import DEFAULT_SPEED
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -44,7 +45,7 @@ VARIANTS = (
     "short_chunks",
 )
 SHORT_CHUNK = 1000  # steps per call of the short_chunks variant
-SPEED_OFF = {  # variant -> the rollout.Speed settings that switch its lever off
+SPEED_OFF = {  # variant -> the reach_jax.speed.Speed settings that switch its lever off
     "dense_layer1": {"sparse_layer1": False},
     "draws_per_step": {"draw_block": 1},
     "unpadded_hidden": {"hidden_pad": 1},
@@ -66,7 +67,7 @@ def measure(variant: str, n_learners: int, cfg) -> float:
     import jax
 
     devices, n_steps = jax.devices(), None
-    speed = dataclasses.replace(rollout.DEFAULT_SPEED, **SPEED_OFF.get(variant, {}))
+    speed = dataclasses.replace(DEFAULT_SPEED, **SPEED_OFF.get(variant, {}))
     if variant == "one_device":
         devices = devices[:1]
     elif variant == "short_chunks":

@@ -29,9 +29,11 @@ import sys
 import time
 from pathlib import Path
 
-from reach_jax import distribute, rollout
+from reach_jax import chunk as chunk_lib
+from reach_jax import distribute
 from reach_jax import run_dir as run_dir_io
 from reach_jax.progress import pow2_batch
+from reach_jax.speed import DEFAULT_SPEED, Speed
 
 BATCHES = (1, 2, 4, 8, 32, 128, 512)  # learners per batch; 1-8: the Table-2 batch (4 conditions x 2 seeds) and its tail
 TABLE2_TRIALS = 2_000_000  # trials per network (section 4.4)
@@ -77,7 +79,7 @@ def time_chunk(
     cfg,
     quick: bool,
     n_steps: int | None = None,
-    speed: rollout.Speed = rollout.DEFAULT_SPEED,
+    speed: Speed = DEFAULT_SPEED,
 ) -> dict:
     """Median learner-steps/s and compile time of make_chunk for one batch size on the given devices.
 
@@ -99,7 +101,7 @@ def time_chunk(
     learners = batch_of(n_learners, cfg)
     budget = jnp.asarray(2**31 - 1, jnp.int32)
     probe = 200
-    chunk = rollout.make_chunk(cfg, probe, devices, speed)
+    chunk = chunk_lib.make_chunk(cfg, probe, devices, speed)
     t0 = time.perf_counter()
     states = jax.block_until_ready(chunk(learners.states, learners.plans, learners.hypers, budget)[0])
     first = time.perf_counter() - t0
@@ -113,14 +115,14 @@ def time_chunk(
         if quick:
             n_steps = LATENCY_STEPS if n_learners <= SMALL_BATCH else probe
     if n_steps != probe:
-        chunk = rollout.make_chunk(cfg, n_steps, devices, speed)
+        chunk = chunk_lib.make_chunk(cfg, n_steps, devices, speed)
         states = jax.block_until_ready(chunk(states, learners.plans, learners.hypers, budget)[0])  # compile, warm
     times = []
     for _ in range(QUICK_REPS if quick else REPS):
         t0 = time.perf_counter()
         states = jax.block_until_ready(chunk(states, learners.plans, learners.hypers, budget)[0])
         times.append(time.perf_counter() - t0)
-    used = len(states.env.arm.sharding.device_set)
+    used = len(states.env.trial.arm.sharding.device_set)
     return {
         "steps_per_s": n_learners * n_steps / statistics.median(times),
         "latency_us": statistics.median(times) / n_steps * 1e6,
@@ -184,7 +186,7 @@ def code_version() -> str:
             capture_output=True,
             text=True,
             check=True,
-            cwd=Path(rollout.__file__).parent,
+            cwd=Path(chunk_lib.__file__).parent,
         )
     except (OSError, subprocess.CalledProcessError):
         return "unknown"

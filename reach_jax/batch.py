@@ -13,14 +13,14 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from reach_jax import hyper, protocol, rollout, task
+from reach_jax import curriculum, hyper, learner_state, protocol, task
 from reach_jax.config import Config, TrainConfig, blocks_of
 
 
 class Batch(NamedTuple):
     """Everything a chunk needs, learner axis first."""
 
-    states: rollout.LearnerState
+    states: learner_state.LearnerState
     conds: task.Condition  # the condition each learner ends in: its own, or its protocol's last block's
     hypers: hyper.Hyper
     plans: protocol.Plan  # what each learner runs, trial by trial
@@ -74,7 +74,7 @@ def init_batch(cfg: Config) -> Batch:
     table = learner_table(cfg.train)
     plan = plans(cfg)
     keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
-    states = jax.vmap(lambda k, p: rollout.init_learner(k, p, cfg))(keys, plan)
+    states = jax.vmap(lambda k, p: learner_state.init_learner(k, p, cfg))(keys, plan)
     # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
     return Batch(*jax.tree.map(jnp.copy, (states, conditions(cfg), hyper_columns(cfg), plan)))
 
@@ -92,7 +92,7 @@ def source_indices(source_table: list[tuple[str, int]], cfg: Config) -> list[int
     return picks
 
 
-def start_from(states: rollout.LearnerState, source, source_table: list[tuple[str, int]], cfg: Config):
+def start_from(states: learner_state.LearnerState, source, source_table: list[tuple[str, int]], cfg: Config):
     """Fresh learner states that take the trained networks of another run (train.init_from, model §12).
 
     Learner (name, seed) takes the network of the source's learner with the same seed index in the condition of
@@ -107,10 +107,11 @@ def start_from(states: rollout.LearnerState, source, source_table: list[tuple[st
     """
     picks = source_indices(source_table, cfg)
     taken = jax.tree.map(lambda a: jnp.asarray(a)[jnp.asarray(picks)], source)
+    cur = curriculum.Curriculum(
+        distance=taken.env.curriculum.distance,
+        full_at=jnp.where(taken.env.curriculum.full_at >= 0, 0, -1).astype(jnp.int32),
+    )
     return states.replace(
         agent=states.agent.replace(params=jax.tree.map(jnp.copy, taken.agent.params), n_max=taken.agent.n_max),
-        curriculum=rollout.Curriculum(
-            distance=taken.curriculum.distance,
-            full_at=jnp.where(taken.curriculum.full_at >= 0, 0, -1).astype(jnp.int32),
-        ),
+        env=states.env.replace(curriculum=cur),
     )

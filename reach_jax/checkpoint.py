@@ -15,10 +15,10 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from reach_jax import compat
 from reach_jax.errors import OneLineError
 from reach_jax.files import atomic_write_bytes
 
-FORMAT_VERSION = 2  # 2: sparse layer-1 rows in the pending step, per-step draws keyed by step index
 CHECKPOINT_DIR = "checkpoints"
 KEEP = 2  # newest checkpoints kept on disk
 
@@ -48,7 +48,7 @@ def save(run_dir: Path, chunk: int, tree, meta: dict, keep_every: int = 0) -> Pa
     folder.mkdir(parents=True, exist_ok=True)
     arrays = flatten(tree)
     arrays["__meta__"] = np.frombuffer(
-        json.dumps({"format_version": FORMAT_VERSION, "chunk": chunk, **meta}).encode(), dtype=np.uint8
+        json.dumps({"format_version": compat.CHECKPOINT_VERSION, "chunk": chunk, **meta}).encode(), dtype=np.uint8
     )
     buf = io.BytesIO()
     np.savez(buf, **arrays)
@@ -74,13 +74,13 @@ def list_checkpoints(run_dir: Path) -> list[Path]:
 
 
 def load(
-    path: Path, template, defaults: dict[str, np.ndarray] | None = None, aliases: dict[str, str] | None = None
+    path: Path, template, defaults: dict[str, np.ndarray] | None = None, aliases=compat.state_aliases
 ) -> tuple[object, dict]:
     """Read a checkpoint into the structure of `template`; raises CheckpointError naming what is wrong.
 
-    A leaf the file lacks is read under its name in `aliases` (where older files kept it), else taken from
-    `defaults`, leaves keyed like `flatten(template)` (fields added to the state since the file was written);
-    any other missing leaf is an error.
+    A leaf the file lacks is read under the first of `aliases(name, format_version)` that it holds (where older
+    formats kept it), else taken from `defaults`, leaves keyed like `flatten(template)` (fields added to the state
+    since the file was written); any other missing leaf is an error.
     """
     path = Path(path)
     try:
@@ -94,17 +94,17 @@ def load(
         meta = json.loads(arrays.pop("__meta__").tobytes().decode())
     except (UnicodeDecodeError, json.JSONDecodeError):
         raise CheckpointError(f"{path}: field __meta__ is not valid JSON") from None
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise CheckpointError(
-            f"{path}: field format_version is {meta.get('format_version')}, expected {FORMAT_VERSION}"
-        )
+    version = meta.get("format_version")
+    if version not in compat.READABLE_CHECKPOINTS:
+        readable = " or ".join(map(str, compat.READABLE_CHECKPOINTS))
+        raise CheckpointError(f"{path}: field format_version is {version}, expected {readable}")
     leaves, treedef = jax.tree_util.tree_flatten_with_path(template)
     fallback = defaults or {}
     restored = []
     for key_path, leaf in leaves:
         name = jax.tree_util.keystr(key_path)
-        old = (aliases or {}).get(name)
-        if name not in arrays and old in arrays:
+        old = next((a for a in aliases(name, version) if a in arrays), None) if name not in arrays else None
+        if old is not None:
             arrays[name] = arrays[old]
         if name not in arrays and name in fallback:
             arrays[name] = fallback[name]

@@ -19,13 +19,12 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from reach_jax import batch, distribute, evaluate, hyper, rollout, train
+from reach_jax import batch, compat, distribute, evaluate, hyper, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import (
     CONDITIONS,
     CONFIG_VERSION,
-    RETIRED_FIELDS,
     Config,
     first_difference,
     from_dict,
@@ -35,6 +34,7 @@ from reach_jax.config import (
     tuplify,
 )
 from reach_jax.errors import OneLineError, printable
+from reach_jax.speed import DEFAULT_SPEED, MAX_HIDDEN_PAD, Speed
 
 EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
 EXIT_NUMERICS = 3  # a learner went non-finite; the last good checkpoint is kept
@@ -87,7 +87,7 @@ def _positive_int(text: str) -> int:
 
 
 def _hidden_pad(text: str) -> int:
-    return _whole_number(text, 1, rollout.MAX_HIDDEN_PAD)
+    return _whole_number(text, 1, MAX_HIDDEN_PAD)
 
 
 def _non_negative_int(text: str) -> int:
@@ -186,7 +186,7 @@ def build_train_parser() -> argparse.ArgumentParser:
         "--hidden-pad",
         type=_hidden_pad,
         help=f"pad the first hidden layer to a multiple of this inside the compiled loop (speed only, not stored; "
-        f"1 = off; default {rollout.DEFAULT_SPEED.hidden_pad})",
+        f"1 = off; default {DEFAULT_SPEED.hidden_pad})",
     )
     p.add_argument(
         "--devices",
@@ -267,7 +267,7 @@ def _with_settings(data: dict, args) -> dict:
     """Config data with the --set values and the training flags written over it, in that order."""
     data = json.loads(json.dumps(data))  # a deep copy that the caller's dict never sees
     for section, field, value in args.set:
-        if field in RETIRED_FIELDS.get(section, ()):
+        if compat.retired(section, field):
             raise UsageError(f"--set {section}.{field}: no longer a config field (a speed setting: see --help)")
         part = data.setdefault(section, {})
         if section == "conditions":  # conditions.NAME.FIELD: a field of one condition, added if it is new
@@ -308,7 +308,7 @@ class Invocation(NamedTuple):
     run_dir: Path  # where the run lives
     resume: bool  # continue from the newest checkpoint
     quiet: bool  # no progress bar
-    speed: rollout.Speed  # how the compiled loop runs
+    speed: Speed  # how the compiled loop runs
 
 
 def _first_existing(path: Path) -> Path:
@@ -325,7 +325,7 @@ def parse(argv=None) -> Invocation:
 
 def validate(args: argparse.Namespace) -> Invocation:
     """Check parsed training arguments against the config and the file system; writes nothing."""
-    speed = rollout.Speed(**({} if args.hidden_pad is None else {"hidden_pad": args.hidden_pad}))
+    speed = Speed(**({} if args.hidden_pad is None else {"hidden_pad": args.hidden_pad}))
     if args.resume is not None:
         for flag in ("out", "config"):
             if getattr(args, flag) is not None:

@@ -12,14 +12,10 @@ import json
 import math
 from dataclasses import dataclass, field
 
-from reach_jax import hyper
+from reach_jax import compat, hyper
 from reach_jax.errors import printable
 
 CONFIG_VERSION = 1
-
-# Fields that runs made by older versions stored and that no longer belong to the config: speed knobs, which
-# do not change results (rollout.Speed). from_dict drops them, so those runs still load and resume.
-RETIRED_FIELDS = {"train": ("hidden_pad",)}
 
 
 @dataclass(frozen=True)
@@ -317,24 +313,6 @@ def _build(cls, raw, where: str, base=None):
     return dataclasses.replace(base, **values)
 
 
-@dataclass(frozen=True)
-class _RetiredForce:
-    """The `force` section that configs stored before conditions were data."""
-
-    viscous: tuple[tuple[float, float], tuple[float, float]] = PAPER_CONDITIONS[1].viscous
-    random_amplitude: float = PAPER_CONDITIONS[2].random[0]
-
-
-def _migrate_force(raw: dict, table: dict) -> dict:
-    """Conditions table of a config stored before conditions were data: its `force` section, which held the
-    viscous matrix and the random-force bound, written into the paper's conditions."""
-    force = _build(_RetiredForce, raw, "force")
-    table["viscous"] = dataclasses.replace(table["viscous"], viscous=force.viscous)
-    for name in ("random", "random_nopast"):
-        table[name] = dataclasses.replace(table[name], random=(force.random_amplitude,) * 2)
-    return table
-
-
 def _conditions(raw, table: dict) -> tuple[ConditionConfig, ...]:
     """The conditions table: the paper's four, with the entries of `raw` ({name: fields}) added or changed."""
     if not isinstance(raw, dict):
@@ -375,16 +353,13 @@ def from_dict(data: dict) -> Config:
     version = data.pop("version", None)
     if version != CONFIG_VERSION:
         raise ValueError(f"version: expected {CONFIG_VERSION}, found {version}")
+    data = compat.migrate_config(data)
     table = {c.name: c for c in PAPER_CONDITIONS}
-    if "force" in data:
-        table = _migrate_force(data.pop("force"), table)
     sections = {}
     for f in dataclasses.fields(Config):
         if f.name in ("conditions", "protocols"):
             continue
         raw = data.pop(f.name, {})
-        if isinstance(raw, dict):
-            raw = {k: v for k, v in raw.items() if k not in RETIRED_FIELDS.get(f.name, ())}
         sections[f.name] = _build(f.default_factory, raw, f.name)
     conditions = _conditions(data.pop("conditions", {}), table)
     protocols = _protocols(data.pop("protocols", {}))

@@ -93,13 +93,13 @@ def run_episode(policy, params, mask: jax.Array, field: Field, start: jax.Array,
     tau_max = jnp.asarray(cfg.arm.tau_max)
     s0 = jnp.concatenate([arm.inverse_kinematics(start, cfg.arm), jnp.zeros(2)])
     cond = task.Condition(field=field, input_mask=mask)
-    first = env.reset(s0, target, jnp.zeros(2))
+    first = env.start_trial(s0, target, jnp.zeros(2))
 
     def body(carry, t):
         trial, done, outcome, steps = carry
         obs = observation(trial.arm, trial.prev_arm, trial.prev_tau, target, start, t, mask, cfg)
         tau = jnp.clip(policy(params, obs), -tau_max, tau_max)
-        moved, result = env.step(trial, tau, cond, cfg, drift=False)
+        moved, result = env.step_trial(trial, tau, cond, cfg, drift=False)
         ended = (result.out_of_range | result.goal) & ~done
         outcome = jnp.where(ended, jnp.where(result.out_of_range, OUT, SUCCESS), outcome)
         steps = jnp.where(ended, t + 1, steps)

@@ -140,7 +140,7 @@ def ts_step(
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss (),
       (hidden,) layer-1 pre-activation of x(t) under W(t+1), to carry as the next Pending.u1; hidden is 30,
-      or 32 inside the compiled loops (`rollout.widen_hidden`)).
+      or 32 inside the compiled loops (`chunk.widen_hidden`)).
     """
     layers = network.dense_layers(params)
     w1, b1 = layers[0]

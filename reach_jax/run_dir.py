@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, files, trial_log
+from reach_jax import batch, checkpoint, compat, files, trial_log
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config, first_difference, from_dict, to_dict, to_json
 
@@ -26,24 +26,6 @@ CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.jsonl"
 TRIALS_DIR = "trials"  # the per-trial log: one little-endian binary file per column, appended chunk by chunk
 TRIAL_KEYS = {"learner": "<i4", "trial": "<i4", "chunk": "<i4"}  # columns the shell adds to trial_log.COLUMNS
-# LearnerState fields that checkpoints written before protocols lack (each is filled from a fresh batch).
-ADDED_STATE_FIELDS = ("agent.pending_learning", "cond", "block")
-# Checkpoints written before LearnerState was split stored its fields flat: the groups' names were not in the paths.
-STATE_GROUPS = ("agent", "env", "curriculum", "counters")
-RENAMED_STATE_FIELDS = {"block.index": "block", "block.learning": "learning", "block.catch": "catch"}
-
-
-def flat_state_name(name: str) -> str:
-    """Where a checkpoint written before LearnerState was split kept the leaf that is `name` now."""
-    prefix = "['states']."
-    if not name.startswith(prefix):
-        return name
-    rest = name.removeprefix(prefix)
-    for new, old in RENAMED_STATE_FIELDS.items():
-        if rest == new:
-            return prefix + old
-    group, _, field = rest.partition(".")
-    return prefix + field if group in STATE_GROUPS and field else name
 
 
 def read_config(run_dir: Path) -> Config:
@@ -192,15 +174,13 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[ba
     template = {"states": fresh.states, "hypers": fresh.hypers}
     # Hyperparameters added since the checkpoint was written take their values from the config, and so do the
     # fields that say which condition and block a trial runs in: without a protocol they never change.
-    added = tuple(f".{name}" for name in ADDED_STATE_FIELDS)
     leaves = checkpoint.flatten(template)
     defaults = {
         name: leaf
         for name, leaf in leaves.items()
-        if name.startswith("['hypers']") or name.removeprefix("['states']").startswith(added)
+        if name.startswith("['hypers']") or compat.is_added_state_field(name)
     }
-    aliases = {name: flat_state_name(name) for name in leaves}
-    tree, meta = checkpoint.load(path, template, defaults, aliases)
+    tree, meta = checkpoint.load(path, template, defaults)
     try:
         # Through from_dict, so a field added to the config since the checkpoint reads as its default.
         stored = from_dict(meta["config"])

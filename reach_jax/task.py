@@ -1,8 +1,8 @@
-"""The reaching task: conditions, trial sampling, goal test, target drift and curriculum (model §2, §5, §6).
+"""The reaching task: conditions, trial sampling and placement, goal test and target drift (model §2, §5, §6).
 
 Units: positions and distances [m], speeds [m/s], forces [N], time [s]; fields are `fields.Field` data.
 Randomness enters only through uniform draws in [0, 1) (`TrialDraws`), so a NumPy oracle can replay a run.
-The curriculum distance d bounds the start-target offset in each axis (an L-inf box).
+The curriculum distance (`curriculum`) bounds the start-target offset in each axis (an L-inf box).
 """
 
 from __future__ import annotations
@@ -115,40 +115,6 @@ def drift_target(target: jax.Array, hand: jax.Array, step_in_trial: jax.Array, c
     shifted = target + gap * (move / jnp.maximum(dist, 1e-12))
     moved = moving & (dist > 0)
     return jnp.where(moved, shifted, target), moved
-
-
-def curriculum_bounds(cfg: Config) -> tuple[float, float]:
-    """(initial and minimum, maximum) curriculum distance [m]; the maximum spans the whole field."""
-    return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
-
-
-def update_curriculum(
-    distance: jax.Array,
-    goal: jax.Array,
-    drifted: jax.Array,
-    was_full: jax.Array,
-    cfg: Config,
-    early: jax.Array = False,
-) -> jax.Array:
-    """Staircase after a trial: grow after a success without drift, shrink after an out or a cap.
-
-    A drift-aided success also shrinks it, except once the curriculum has been full and
-    cfg.task.drift_neutral_when_full is set, or at any time when `early` is (hyper `drift_neutral_early`): then it
-    leaves the distance unchanged. A learner that needs the drift for some trials (a strong random force, little
-    exploration noise) keeps the whole field.
-
-    Args:
-      distance: () curriculum distance [m].
-      goal: () bool, the trial reached the goal.
-      drifted: () bool, the target drifted during the trial.
-      was_full: () bool, the distance has reached the whole field at some earlier trial.
-      cfg: model config.
-      early: () bool, a drift-aided success is neutral before the first full field too.
-    """
-    lo, hi = curriculum_bounds(cfg)
-    neutral = goal & drifted & ((was_full & cfg.task.drift_neutral_when_full) | early)
-    step = jnp.where(goal & ~drifted, cfg.task.curriculum_step, jnp.where(neutral, 0.0, -cfg.task.curriculum_step))
-    return jnp.clip(distance + step, lo, hi)
 
 
 def observe(state, prev_state, prev_tau, target, mask, cfg: Config) -> jax.Array:

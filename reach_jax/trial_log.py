@@ -1,10 +1,12 @@
-"""Per-trial movement measures that adaptation studies plot, gathered inside the compiled step (model §12).
+"""Per-trial movement measures that adaptation studies plot, gathered in the compiled step, and their buffer (§12).
 
 Units: positions and errors [m], angles [rad], speeds [m/s], durations [s]. A trial's aim is the line from the
 hand's start to the target as placed (before any drift). Errors are signed: positive to the left of the aim.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -82,3 +84,32 @@ def record(trace: TrialTrace, block, catch, goal, out, t, cfg: Config) -> jax.Ar
         trace.peak_speed,
     )
     return jnp.stack([jnp.asarray(v, jnp.float32) for v in values])
+
+
+class TrialBuffer(NamedTuple):
+    """One learner's per-trial records of a chunk, filled from the front."""
+
+    rows: jax.Array  # (capacity, len(COLUMNS)) float32 records
+    trial: jax.Array  # (capacity,) int32 index of each recorded trial over the learner's life
+    count: jax.Array  # () int32 records written
+
+
+def empty_buffer(cfg: Config) -> TrialBuffer:
+    """A buffer that holds every logged trial of one chunk: at most one trial ends per step."""
+    capacity = cfg.train.chunk_steps // max(cfg.train.trial_log_every, 1) + 1
+    return TrialBuffer(
+        rows=jnp.zeros((capacity, len(COLUMNS)), jnp.float32),
+        trial=jnp.zeros(capacity, jnp.int32),
+        count=jnp.array(0, jnp.int32),
+    )
+
+
+def log_trial(buffer: TrialBuffer, ended: jax.Array, row: jax.Array, trial: jax.Array, every: int) -> TrialBuffer:
+    """buffer with `row` (len(COLUMNS),) added if the step `ended` trial index `trial`, a multiple of `every`."""
+    keep = ended & (trial % every == 0)
+    i = jnp.minimum(buffer.count, buffer.trial.shape[0] - 1)
+    return TrialBuffer(
+        rows=buffer.rows.at[i].set(jnp.where(keep, row, buffer.rows[i])),
+        trial=buffer.trial.at[i].set(jnp.where(keep, trial, buffer.trial[i])),
+        count=buffer.count + keep,
+    )

@@ -17,9 +17,11 @@ import numpy as np
 import pytest
 from conftest import default_hyper
 
-from reach_jax import arm, encoding, env, fields, learner, network, protocol, rollout, sensor, task
+from reach_jax import arm, curriculum, encoding, env, fields, learner, network, protocol, random_stream, sensor, task
 from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_dict
+from reach_jax.learner_state import init_learner
 from reach_jax.testing import reference
+from reach_jax.testing.trace import make_trace
 
 CFG = Config()
 N_SAMPLES = 8  # random draws per comparison: enough to hit every branch, few enough to stay fast
@@ -102,24 +104,24 @@ def test_dsdt_and_rk4_match_oracle(case):
         assert np.abs(plain - want_d).max() > 1e-3
 
 
-_ENV_STEP = jax.jit(lambda s, tau, c: env.step(s, tau, c, CFG))
+_ENV_STEP = jax.jit(lambda s, tau, c: env.step_trial(s, tau, c, CFG))
 
 
 @pytest.mark.parametrize("case", sorted(FORCE_CASES))
 def test_environment_trial_matches_oracle(case):
-    """env.reset, observe and step through 80 steps under random torques: the same arm, input and outcomes."""
+    """env.start_trial, observe_trial and step_trial for 80 steps of random torques: the same arm, input, outcomes."""
     spec, force = FORCE_CASES[case]
     rng = _rng(5)
     cond = task.Condition(field=fields.make_field(spec), input_mask=encoding.input_mask(True, CFG))
     start = np.concatenate([reference.inverse_kinematics(np.array([-0.09, 0.34]), CFG.arm), np.zeros(2)])
     target = np.array([-0.01, 0.41])
-    trial = env.reset(jnp.asarray(start), jnp.asarray(target), jnp.asarray(force))
+    trial = env.start_trial(jnp.asarray(start), jnp.asarray(target), jnp.asarray(force))
     state, prev, prev_tau, ref_target = start, start, np.zeros(2), target
     mask = reference.input_mask(True, CFG)
     seen_drift = False
     for t in range(1, 81):
         want_x = reference.observe(state, prev, prev_tau, ref_target, mask, CFG)
-        np.testing.assert_allclose(np.asarray(env.observe(trial, cond, CFG)), want_x, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(env.observe_trial(trial, cond, CFG)), want_x, rtol=0, atol=1e-9)
         tau = rng.uniform(-0.5, 0.5, 2) * np.array(CFG.arm.tau_max)
         trial, outcome = _ENV_STEP(trial, jnp.asarray(tau), cond)
         moved = reference.arm_step(state, tau, spec, force, CFG.arm)
@@ -467,7 +469,7 @@ def test_n_max_and_curriculum_match_oracle():
     for n_max, n_steps in [(100.0, 150), (100.0, 99), (100.0, 100), (10.0, 3)]:
         got = float(upd(jnp.asarray(n_max), jnp.asarray(n_steps, jnp.int32)))
         assert got == pytest.approx(reference.update_n_max(n_max, n_steps, lam), rel=1e-15)
-    cur = jax.jit(lambda d, g, dr, full, early: task.update_curriculum(d, g, dr, full, CFG, early))
+    cur = jax.jit(lambda d, g, dr, full, early: curriculum.staircase(d, g, dr, full, CFG, early))
     lo, hi = reference.curriculum_bounds(CFG)
     for d in (lo, 0.5 * (lo + hi), hi):
         for goal, drifted, full, early in itertools.product((True, False), repeat=4):
@@ -561,14 +563,14 @@ def test_rollout_replays_in_oracle(forms):
     ref_plan = reference.make_plan("replay", cfg)
     hyper = default_hyper(cfg)
     h = {name: float(v) for name, v in hyper._asdict().items()}
-    trace = rollout.make_trace(cfg, ROLLOUT_STEPS)  # compiled once, run for each seed
+    trace = make_trace(cfg, ROLLOUT_STEPS)  # compiled once, run for each seed
     seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0, "catch": 0, "frozen": 0}
     for seed in ROLLOUT_SEEDS:
-        state = rollout.init_learner(jax.random.PRNGKey(seed), plan, cfg)
+        state = init_learner(jax.random.PRNGKey(seed), plan, cfg)
         state = state.replace(agent=state.agent.replace(params=_float64_params(state.agent.params)))
         final, infos = trace(state, plan, hyper)
         infos = jax.tree.map(np.asarray, infos)
-        units = 2.0 * np.asarray(rollout.step_uniforms(state.key, 0, ROLLOUT_STEPS, cfg))[:, :2] - 1.0
+        units = 2.0 * np.asarray(random_stream.step_uniforms(state.key, 0, ROLLOUT_STEPS, cfg))[:, :2] - 1.0
 
         lrn = reference.learner_from_jax(state, ref_plan[0].cond)  # the first block has no catch trials
         recs = []
@@ -601,12 +603,12 @@ def test_rollout_replays_in_oracle(forms):
         chex.assert_trees_all_close(
             jax.tree.map(np.asarray, final.agent.params), reference.layers_to_flax(lrn.layers), rtol=0, atol=1e-9
         )
-        trial = final.env
+        trial = final.env.trial
         np.testing.assert_allclose(np.asarray(trial.arm), lrn.arm, rtol=0, atol=1e-9)
         np.testing.assert_allclose(np.asarray(trial.target), lrn.target, rtol=0, atol=1e-9)
         assert float(final.agent.n_max) == pytest.approx(lrn.n_max, abs=1e-9)
-        assert float(final.curriculum.distance) == pytest.approx(lrn.distance, abs=1e-12)
-        assert int(final.counters.trials) == lrn.trials and int(trial.t) == lrn.t and bool(trial.drifted) == lrn.drifted
+        assert float(final.env.curriculum.distance) == pytest.approx(lrn.distance, abs=1e-12)
+        assert int(final.env.trials) == lrn.trials and int(trial.t) == lrn.t and bool(trial.drifted) == lrn.drifted
 
     # The reset path (and each way of ending a trial, and the drift) was exercised; quiet steps only where asked.
     quiet = seen.pop("quiet")

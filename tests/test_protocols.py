@@ -11,8 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import adaptation, batch, checkpoint, cli, evaluate, protocol, rollout, train
+from reach_jax import adaptation, batch, checkpoint, cli, evaluate, protocol, train
 from reach_jax import run_dir as run_dir_io
+from reach_jax.chunk import make_chunk
 from reach_jax.config import condition, from_dict
 
 SWITCH = [
@@ -58,7 +59,7 @@ def test_blocks_switch_on_their_trial():
 
     # In the compiled chunk every logged trial ran in the block its index falls in.
     group = batch.init_batch(cfg)
-    states, log = rollout.make_chunk(cfg, 700)(group.states, group.plans, group.hypers, jnp.int32(cfg.train.trials))
+    states, log = make_chunk(cfg, 700)(group.states, group.plans, group.hypers, jnp.int32(cfg.train.trials))
     records = train.trial_records(log, np.arange(2), 1)
     assert len(records["trial"]) > 2 * 20
     ends = np.cumsum([b["trials"] for b in SWITCH])
@@ -75,10 +76,10 @@ def test_a_frozen_block_keeps_the_weights_and_a_learning_one_changes_them():
     for learning in (False, True):
         cfg = config([{"trials": 1000, "condition": "none", "learning": learning}])
         group = batch.init_batch(cfg)
-        states, _ = rollout.make_chunk(cfg, 300)(
+        states, _ = make_chunk(cfg, 300)(
             jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, jnp.int32(1000)
         )
-        assert int(states.counters.trials.min()) > 10
+        assert int(states.env.trials.min()) > 10
         outs.append((group.states.agent.params, states.agent.params))
     chex.assert_trees_all_equal(*outs[0])
     assert not all(np.array_equal(a, b) for a, b in zip(*(jax.tree.leaves(p) for p in outs[1]), strict=True))
@@ -94,7 +95,7 @@ def test_catch_trials_come_at_their_rate_in_the_catch_condition():
     assert not bool(block.catch) and np.asarray(cond.field.viscous).any()
 
     group = batch.init_batch(cfg)
-    _, log = rollout.make_chunk(cfg, 6000)(group.states, group.plans, group.hypers, jnp.int32(10**5))
+    _, log = make_chunk(cfg, 6000)(group.states, group.plans, group.hypers, jnp.int32(10**5))
     catch = train.trial_records(log, np.arange(2), 1)["catch"]
     n = len(catch)
     assert n > 1000  # enough trials that 4 standard deviations are under 0.06
@@ -161,7 +162,7 @@ def test_networks_start_from_another_run_and_a_missing_one_is_a_one_line_error(t
     first = run_dir_io.load_batch(out, run_dir_io.read_config(out), checkpoint.checkpoint_path(out, 0))[0]
     # The one learner (seed 0) took the network of condition none, seed 0: learner 0 of the source.
     chex.assert_trees_all_equal(first.states.agent.params, jax.tree.map(lambda a: a[:1], src))
-    assert int(first.states.counters.trials[0]) == 0
+    assert int(first.states.env.trials[0]) == 0
     capsys.readouterr()
 
     for extra, needle in (

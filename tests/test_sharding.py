@@ -33,7 +33,8 @@ def test_sharded_chunk_equals_unsharded():
         from reach_jax import distribute
         distribute.setup_backend({N_DEVICES})
         import jax, jax.numpy as jnp, numpy as np
-        from reach_jax import batch, rollout
+        from reach_jax import batch
+        from reach_jax.chunk import make_chunk
         from reach_jax.config import Config, TrainConfig
 
         assert len(jax.devices()) == {N_DEVICES}
@@ -41,15 +42,15 @@ def test_sharded_chunk_equals_unsharded():
         group = batch.init_batch(cfg)  # 4 conditions x 2 seeds = 8 learners
         budget = jnp.asarray(10**6)
         fresh = lambda: jax.tree.map(jnp.copy, group.states)
-        one = rollout.make_chunk(cfg, 300, devices=jax.devices()[:1])
-        many = rollout.make_chunk(cfg, 300)
+        one = make_chunk(cfg, 300, devices=jax.devices()[:1])
+        many = make_chunk(cfg, 300)
         a = one(one(fresh(), group.plans, group.hypers, budget)[0], group.plans, group.hypers, budget)[0]
         b = many(many(fresh(), group.plans, group.hypers, budget)[0], group.plans, group.hypers, budget)[0]
-        assert len(a.env.arm.sharding.device_set) == 1
-        assert len(b.env.arm.sharding.device_set) == {N_DEVICES}
+        assert len(a.env.trial.arm.sharding.device_set) == 1
+        assert len(b.env.trial.arm.sharding.device_set) == {N_DEVICES}
         for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True):
             np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
-        assert int(np.asarray(a.counters.trials).sum()) > 0
+        assert int(np.asarray(a.env.trials).sum()) > 0
         print("identical")
         """
     )

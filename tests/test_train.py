@@ -16,18 +16,21 @@ from reach_jax import (
     arm,
     batch,
     cli,
+    curriculum,
     encoding,
     exploration,
     fields,
     learner,
     network,
     protocol,
+    random_stream,
     rollout,
     sensor,
     task,
     train,
 )
 from reach_jax import run_dir as run_dir_io
+from reach_jax.chunk import make_chunk, narrow_hidden, widen_hidden
 from reach_jax.config import (
     CONDITIONS,
     ConditionConfig,
@@ -39,6 +42,9 @@ from reach_jax.config import (
     n_past_inputs,
     to_dict,
 )
+from reach_jax.learner_state import init_learner
+from reach_jax.speed import DEFAULT_SPEED, Speed
+from reach_jax.testing.trace import make_trace
 
 CFG = Config()
 
@@ -101,12 +107,12 @@ def test_n_max_follows_eq_3():
 
 
 def test_curriculum_staircase_moves_and_stays_in_bounds():
-    lo, hi = task.curriculum_bounds(CFG)
+    lo, hi = curriculum.bounds(CFG)
     step = CFG.task.curriculum_step
     yes, no = jnp.array(True), jnp.array(False)
 
     def cur(d, goal, drifted=no, was_full=no, cfg=CFG):
-        return float(task.update_curriculum(jnp.asarray(d), goal, drifted, was_full, cfg))
+        return float(curriculum.staircase(jnp.asarray(d), goal, drifted, was_full, cfg))
 
     assert cur(0.1, yes) == pytest.approx(0.1 + step)
     assert cur(0.1, no) == pytest.approx(0.1 - step)
@@ -150,16 +156,16 @@ def test_conditions_are_data():
 def test_trials_end_and_reset_inside_the_scan():
     # A 0.2 s cap forces trial ends within the trace, whatever the network does.
     cfg = dataclasses.replace(CFG, task=dataclasses.replace(TaskConfig(), max_trial_time=0.2))
-    trace = rollout.make_trace(cfg, 60)
+    trace = make_trace(cfg, 60)
     n_now, n_past = n_inputs(cfg) - n_past_inputs(cfg), n_past_inputs(cfg)
     joints = n_past - 2 * cfg.encoding.tau_units
     for name in ("none", "random_nopast"):
         plan = protocol.make_plan(name, cfg)
-        final, info = trace(rollout.init_learner(jax.random.PRNGKey(0), plan, cfg), plan, default_hyper(cfg))
+        final, info = trace(init_learner(jax.random.PRNGKey(0), plan, cfg), plan, default_hyper(cfg))
         done = np.asarray(info.goal | info.out_of_range | info.cap)
         assert done.sum() >= 5
         stats = final.counters.stats
-        assert int(final.counters.trials) == done.sum() == int(stats.trials)
+        assert int(final.env.trials) == done.sum() == int(stats.trials)
         assert int(stats.goals + stats.outs + stats.caps) == done.sum()
         x = np.asarray(info.x)
         first = np.flatnonzero(done[:-1]) + 1
@@ -177,14 +183,14 @@ def test_draws_do_not_depend_on_how_steps_are_split():
     # 150 steps = two RNG blocks and a remainder; 70 + 80 splits the blocks elsewhere.
     cfg = tiny()
     cond = protocol.make_plan("random", cfg)
-    state = rollout.init_learner(jax.random.PRNGKey(3), cond, cfg)
+    state = init_learner(jax.random.PRNGKey(3), cond, cfg)
     hyper = default_hyper(cfg)
-    whole, info = rollout.make_trace(cfg, 150)(state, cond, hyper)
-    half, first = rollout.make_trace(cfg, 70)(state, cond, hyper)
-    split, second = rollout.make_trace(cfg, 80)(half, cond, hyper)
+    whole, info = make_trace(cfg, 150)(state, cond, hyper)
+    half, first = make_trace(cfg, 70)(state, cond, hyper)
+    split, second = make_trace(cfg, 80)(half, cond, hyper)
     chex.assert_trees_all_equal(split, whole)
     np.testing.assert_array_equal(np.concatenate([first.rnd, second.rnd]), np.asarray(info.rnd))
-    assert 150 > 2 * rollout.DEFAULT_SPEED.draw_block and len(np.unique(np.asarray(info.rnd)[:, 0])) == 150
+    assert 150 > 2 * DEFAULT_SPEED.draw_block and len(np.unique(np.asarray(info.rnd)[:, 0])) == 150
 
 
 def test_exploration_forms_at_their_neutral_values_are_white_noise_bit_for_bit():
@@ -251,41 +257,42 @@ def test_exploration_anneals_once_the_curriculum_is_full():
 
     # In a rollout, full_at records the trial count when the distance first reaches its maximum, once.
     cfg = tiny()
-    _, hi = task.curriculum_bounds(cfg)
+    _, hi = curriculum.bounds(cfg)
     cond, hyper = protocol.make_plan("none", cfg), default_hyper(cfg)
-    start = rollout.init_learner(jax.random.PRNGKey(0), cond, cfg)
-    assert int(start.curriculum.full_at) == -1
-    one, many = rollout.make_trace(cfg, 1), rollout.make_trace(cfg, 300)
+    start = init_learner(jax.random.PRNGKey(0), cond, cfg)
+    assert int(start.env.curriculum.full_at) == -1
+    one, many = make_trace(cfg, 1), make_trace(cfg, 300)
     at_top = start.replace(
-        curriculum=start.curriculum.replace(distance=jnp.asarray(hi)),
-        counters=start.counters.replace(trials=jnp.asarray(7, jnp.int32)),
+        env=start.env.replace(
+            curriculum=start.env.curriculum.replace(distance=jnp.asarray(hi)), trials=jnp.asarray(7, jnp.int32)
+        )
     )
     reached = one(at_top, cond, hyper)[0]
-    assert int(reached.curriculum.full_at) == 7
+    assert int(reached.env.curriculum.full_at) == 7
     later, info = many(reached, cond, hyper)
     assert np.any(info.out_of_range | info.cap)  # failures moved the distance down, and full_at stayed
-    assert float(later.curriculum.distance) < hi and int(later.curriculum.full_at) == 7
+    assert float(later.env.curriculum.distance) < hi and int(later.env.curriculum.full_at) == 7
     full_cfg = dataclasses.replace(cfg, task=dataclasses.replace(cfg.task, curriculum_init_cells=cfg.sensor.n_cells))
-    assert int(rollout.init_learner(jax.random.PRNGKey(0), cond, full_cfg).curriculum.full_at) == 0
+    assert int(init_learner(jax.random.PRNGKey(0), cond, full_cfg).env.curriculum.full_at) == 0
 
     # The rollout explores within the annealed bound: full from the start, halved after one trial.
     annealed = dataclasses.replace(
         full_cfg, learner=dataclasses.replace(full_cfg.learner, noise_final_ratio=0.5, noise_anneal_trials=1)
     )
-    start = rollout.init_learner(jax.random.PRNGKey(0), cond, annealed)
-    start = start.replace(counters=start.counters.replace(trials=jnp.asarray(1, jnp.int32)))
+    start = init_learner(jax.random.PRNGKey(0), cond, annealed)
+    start = start.replace(env=start.env.replace(trials=jnp.asarray(1, jnp.int32)))
     hyper = default_hyper(annealed)
-    rnd = np.abs(np.asarray(rollout.make_trace(annealed, 200)(start, cond, hyper)[1].rnd))
+    rnd = np.abs(np.asarray(make_trace(annealed, 200)(start, cond, hyper)[1].rnd))
     assert rnd.max() <= 0.5 * annealed.learner.noise and rnd.max() > 0.45 * annealed.learner.noise
 
 
 def test_frozen_after_budget():
     cfg = tiny(trials=1)
     group = batch.init_batch(cfg)
-    chunk = rollout.make_chunk(cfg, 400)
+    chunk = make_chunk(cfg, 400)
     states, log = chunk(group.states, group.plans, group.hypers, jnp.array(1))
     assert log is None  # no per-trial log unless train.trial_log_every asks
-    assert int(states.counters.trials[0]) == 1
+    assert int(states.env.trials[0]) == 1
     again, _ = chunk(jax.tree.map(jnp.copy, states), group.plans, group.hypers, jnp.array(1))
     chex.assert_trees_all_equal(again.agent.params, states.agent.params)
     assert int(again.counters.steps[0]) == int(states.counters.steps[0])
@@ -296,7 +303,7 @@ def test_a_fresh_batch_has_the_types_that_a_chunk_returns():
     cfg = tiny()
     group = batch.init_batch(cfg)
     fresh = [jax.typeof(a) for a in jax.tree.leaves(group.states)]
-    states, _ = rollout.make_chunk(cfg, 20)(group.states, group.plans, group.hypers, jnp.array(10**6))
+    states, _ = make_chunk(cfg, 20)(group.states, group.plans, group.hypers, jnp.array(10**6))
     assert fresh == [jax.typeof(a) for a in jax.tree.leaves(states)]
 
 
@@ -318,12 +325,12 @@ def test_batched_chunk_matches_pure_single_learner_train():
     cfg = tiny(conditions=("none", "viscous", "random", "random_nopast"), seeds=2)
     n_steps = 60
     group = batch.init_batch(cfg)
-    chunked, _ = rollout.make_chunk(cfg, n_steps)(group.states, group.plans, group.hypers, jnp.array(10**6))
+    chunked, _ = make_chunk(cfg, n_steps)(group.states, group.plans, group.hypers, jnp.array(10**6))
     keys = jnp.stack([batch.learner_key(cfg.train.seed, s) for _, s in batch.learner_table(cfg.train)])
     pure = jax.jit(jax.vmap(train.make_train(cfg, n_steps)))(keys, group.plans, group.hypers)
     # Same learner, same draws: batching may only reorder float32 sums.
     chex.assert_trees_all_close(pure.agent.params, chunked.agent.params, rtol=1e-4, atol=1e-6)
-    np.testing.assert_array_equal(np.asarray(pure.counters.trials), np.asarray(chunked.counters.trials))
+    np.testing.assert_array_equal(np.asarray(pure.env.trials), np.asarray(chunked.env.trials))
     # Seed s starts from the same weights in every condition; conditions then drive them apart.
     first = jax.tree.leaves(jax.vmap(lambda k: network.init_params(k, cfg))(keys[::2]))[0]
     np.testing.assert_array_equal(first[0], first[1])
@@ -336,23 +343,23 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
     cfg = tiny(conditions=("viscous", "random"))
     group = batch.init_batch(cfg)
     one = jax.tree.map(lambda a: a[0], group.states)
-    wide = rollout.widen_hidden(one, rollout.DEFAULT_SPEED.hidden_pad)
+    wide = widen_hidden(one, DEFAULT_SPEED.hidden_pad)
     (w1, b1), (w2, _), _ = network.dense_layers(wide.agent.params)
     assert w1.shape == (n_inputs(cfg), 32) and b1.shape == (32,) and w2.shape == (32, 10)
     assert wide.agent.pending.u1.shape == (32,)
-    chex.assert_trees_all_equal(rollout.narrow_hidden(wide, cfg), one)
-    assert rollout.DEFAULT_SPEED.hidden_pad == 8
+    chex.assert_trees_all_equal(narrow_hidden(wide, cfg), one)
+    assert DEFAULT_SPEED.hidden_pad == 8
 
     @jax.jit
     def learn(state, cond, hyper):
         def body(s, u):
             return rollout.learner_step(s, u, cond, hyper, cfg)[0], None
 
-        return jax.lax.scan(body, state, rollout.step_uniforms(state.key, state.counters.steps, 2000, cfg))[0]
+        return jax.lax.scan(body, state, random_stream.step_uniforms(state.key, state.counters.steps, 2000, cfg))[0]
 
     cond, hyper = (jax.tree.map(lambda a: a[0], t) for t in (group.plans, group.hypers))
     learned = learn(wide, cond, hyper)
-    assert int(learned.counters.trials) > 5
+    assert int(learned.env.trials) > 5
     (w1, b1), (w2, _), _ = network.dense_layers(learned.agent.params)
     for pad in (w1[:, 30:], b1[30:], w2[30:], learned.agent.pending.u1[30:]):
         np.testing.assert_array_equal(pad, 0.0)
@@ -360,14 +367,12 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
 
     # The padded layout, like the other Speed settings, is a speed choice only: the results are the same bit for bit.
     budget = jnp.array(10**6)
-    speeds = [rollout.DEFAULT_SPEED] + [
-        rollout.Speed(**{name: value}) for name, value in (("hidden_pad", 1), ("draw_block", 7), ("donate", False))
+    speeds = [DEFAULT_SPEED] + [
+        Speed(**{name: value}) for name, value in (("hidden_pad", 1), ("draw_block", 7), ("donate", False))
     ]
     runs = [
-        rollout.make_chunk(cfg, 700, speed=speed)(
-            jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, budget
-        )[0]
-        for speed in [*speeds, rollout.Speed(sparse_layer1=False)]
+        make_chunk(cfg, 700, speed=speed)(jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, budget)[0]
+        for speed in [*speeds, Speed(sparse_layer1=False)]
     ]
     assert network.dense_layers(runs[0].agent.params)[0][0].shape == (2, n_inputs(cfg), 30)
     for speed, other in zip(speeds[1:], runs[1:], strict=False):
@@ -509,7 +514,7 @@ def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
     group, chunk = run_dir_io.load_batch(out, cfg)
     assert chunk == chunks
     np.testing.assert_array_equal(
-        np.asarray(group.states.counters.trials), [r["trials"] for r in rows if r["chunk"] == chunks]
+        np.asarray(group.states.env.trials), [r["trials"] for r in rows if r["chunk"] == chunks]
     )
     assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == cli.EXIT_USAGE
     assert "--resume" in capsys.readouterr().err

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import env, exploration, network, protocol, rollout
+from reach_jax import env, exploration, network, protocol, random_stream, rollout
 from reach_jax import run_dir as run_dir_io
 
 SETBACK = 0.9  # a chunk whose curriculum distance is below this fraction of the whole field is a crisis
@@ -94,14 +94,14 @@ def actor_signal(run: Path, condition: str, n_states: int, samples: int, bounds,
     stride = 5  # every 5th step of a frozen rollout, so that the states come from many trials
 
     def lookahead(state, params, n_max, key):
-        cond = state.cond
-        out = network.apply(params, env.observe(state.env, cond, cfg), cfg)
+        cond = state.env.cond
+        out = network.apply(params, env.observe_trial(state.env.trial, cond, cfg), cfg)
         p_now, m = out[0], out[1:]
         cost = cfg.learner.p_range / n_max
 
         def signal(rnd):
-            cont, outcome = env.step(state.env, network.torque(m + rnd, 0.0, cfg), cond, cfg)
-            p_next = network.apply(params, env.observe(cont, cond, cfg), cfg)[0]
+            cont, outcome = env.step_trial(state.env.trial, network.torque(m + rnd, 0.0, cfg), cond, cfg)
+            p_next = network.apply(params, env.observe_trial(cont, cond, cfg), cfg)[0]
             p_next = jnp.where(outcome.goal, cfg.learner.reward_goal, p_next)
             p_next = jnp.where(outcome.out_of_range, cfg.learner.reward_out, p_next)
             dp = p_next - p_now
@@ -119,7 +119,8 @@ def actor_signal(run: Path, condition: str, n_states: int, samples: int, bounds,
         def body(carry, k):
             s = carry
             for _ in range(stride):
-                s = rollout.learner_step(s, jax.random.uniform(k, (rollout.n_uniforms(cfg),)), plan, hyper, cfg)[0]
+                u = jax.random.uniform(k, (random_stream.n_uniforms(cfg),))
+                s = rollout.learner_step(s, u, plan, hyper, cfg)[0]
                 k = jax.random.fold_in(k, 1)
             return s, lookahead(s, params, s.agent.n_max, jax.random.fold_in(k, 2))
 
@@ -134,7 +135,7 @@ def actor_signal(run: Path, condition: str, n_states: int, samples: int, bounds,
         ratios.append(np.asarray(r))
         values.append(np.asarray(p))
     ratios = np.concatenate(ratios)  # (states, bounds, beta, joint)
-    trained_bound = float(exploration.schedule(hyper, state.counters.trials, state.curriculum.full_at))
+    trained_bound = float(exploration.schedule(hyper, state.env.trials, state.env.curriculum.full_at))
     return {
         "run": str(run),
         "condition": condition,

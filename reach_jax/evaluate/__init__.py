@@ -623,7 +623,7 @@ def evaluate_run(data: run_dir_io.Run) -> dict:
     for row in imp["per_network"]:
         row["recipe"] = recipe_of[row["learner"]]
     verdicts = decide(table, per_seed, imp, recipes, recipe_of, data.metrics, cfg)
-    trials = np.asarray(data.batch.states.counters.trials)
+    trials = np.asarray(data.batch.states.env.trials)
     return {
         "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
         "table2": {**table, "chunk": data.chunk, "trials_per_network": [int(t) for t in trials]},

@@ -2,7 +2,7 @@
 
 It follows the paper's equations line by line and is written independently of the JAX code: no jax import,
 explicit loops, np.linalg.solve for eq. 4-5, a hand-written backprop. It can replay a JAX run from the noise
-and uniform draws of a JAX run (`reach_jax.rollout.step_uniforms`), or run on its own numpy RNG (`run_reference`).
+and uniform draws of a JAX run (`reach_jax.random_stream.step_uniforms`), or run on its own numpy RNG (`run_reference`).
 
 Units: joint angles [rad], joint velocities [rad/s], torques [N m], hand positions [m] in the shoulder frame
 (x right, y forward), hand velocities [m/s], hand forces [N], viscous fields [N s/m], time [s]; network signals
@@ -711,12 +711,12 @@ class StepRecord(NamedTuple):
 
 
 def learner_from_jax(state, cond: Condition) -> Learner:
-    """Copy of a `reach_jax.rollout.LearnerState` (one learner) whose trial runs in `cond`.
+    """Copy of a `reach_jax.learner_state.LearnerState` (one learner) whose trial runs in `cond`.
 
-    Args: state with its trial's (4,) arm, (2,) target etc.; cond the oracle's copy of state.cond.
+    Args: state with its trial's (4,) arm, (2,) target etc.; cond the oracle's copy of state.env.cond.
     Returns: a Learner.
     """
-    agent, trial, counters = state.agent, state.env, state.counters
+    agent, trial, counters = state.agent, state.env.trial, state.counters
     pend = agent.pending
     return Learner(
         layers=layers_from_flax(agent.params),
@@ -736,12 +736,12 @@ def learner_from_jax(state, cond: Condition) -> Learner:
         t=int(trial.t),
         drifted=bool(trial.drifted),
         n_max=float(agent.n_max),
-        distance=float(state.curriculum.distance),
+        distance=float(state.env.curriculum.distance),
         cond=cond,
-        learning=bool(state.block.learning),
+        learning=bool(state.env.block.learning),
         pending_learning=bool(agent.pending_learning),
-        was_full=bool(state.curriculum.full_at >= 0),
-        trials=int(counters.trials),
+        was_full=bool(state.env.curriculum.full_at >= 0),
+        trials=int(state.env.trials),
         steps=int(counters.steps),
     )
 

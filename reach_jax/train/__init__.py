@@ -14,10 +14,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, distribute, exploration, rollout, trial_log
+from reach_jax import batch, checkpoint, distribute, exploration, learner_state, rollout, trial_log
 from reach_jax import run_dir as run_dir_io
+from reach_jax.chunk import make_chunk, scan_steps
 from reach_jax.config import Config, TrainConfig
 from reach_jax.progress import LearnerEta, Progress, pow2_batch
+from reach_jax.speed import DEFAULT_SPEED, Speed
 
 
 class NumericsError(RuntimeError):
@@ -31,26 +33,30 @@ def make_train(cfg: Config, n_steps: int):
         def step_body(carry, u):
             return (rollout.learner_step(carry[0], u, plan, hyper, cfg)[0], None), None
 
-        return rollout.scan_steps(step_body, rollout.init_learner(key, plan, cfg), n_steps, cfg)[0]
+        return scan_steps(step_body, learner_state.init_learner(key, plan, cfg), n_steps, cfg)[0]
 
     return train
 
 
-def finite_learners(states: rollout.LearnerState) -> np.ndarray:
+def finite_learners(states: learner_state.LearnerState) -> np.ndarray:
     """(L,) bool: every parameter and arm value of the learner is finite (on the host copy the shell holds)."""
-    leaves = jax.tree.leaves((states.agent.params, states.env.arm, states.agent.n_max))
+    leaves = jax.tree.leaves((states.agent.params, states.env.trial.arm, states.agent.n_max))
     per_leaf = [np.isfinite(np.asarray(x).reshape(len(x), -1)).all(axis=1) for x in leaves]
     return np.all(per_leaf, axis=0)
 
 
-def metrics_rows(states: rollout.LearnerState, table, chunk: int, wall: float, cfg: Config) -> list[dict]:
+def metrics_rows(states: learner_state.LearnerState, table, chunk: int, wall: float, cfg: Config) -> list[dict]:
     """One metrics record per learner for the chunk just run."""
-    counters, cur = states.counters, states.curriculum
+    counters, cur = states.counters, states.env.curriculum
     s = jax.device_get(counters.stats)
-    trials, steps = np.asarray(counters.trials), np.asarray(counters.steps)
-    distance, n_max, block = np.asarray(cur.distance), np.asarray(states.agent.n_max), np.asarray(states.block.index)
+    trials, steps = np.asarray(states.env.trials), np.asarray(counters.steps)
+    distance, n_max, block = (
+        np.asarray(cur.distance),
+        np.asarray(states.agent.n_max),
+        np.asarray(states.env.block.index),
+    )
     hypers = batch.learner_hypers(cfg)
-    bound = np.asarray(exploration.schedule(batch.hyper_columns(cfg), counters.trials, cur.full_at))
+    bound = np.asarray(exploration.schedule(batch.hyper_columns(cfg), states.env.trials, cur.full_at))
     rows = []
     for i, ((cond, seed), hyper) in enumerate(zip(table, hypers, strict=True)):
         ended = int(s.trials[i])
@@ -118,7 +124,7 @@ def merge_members(states, members: np.ndarray, ran):
     were but with zeroed chunk counters."""
     counters = states.counters
     states = states.replace(counters=counters.replace(stats=jax.tree.map(np.zeros_like, counters.stats)))
-    if len(members) == len(np.asarray(counters.trials)):
+    if len(members) == len(np.asarray(states.env.trials)):
         return jax.tree.map(np.asarray, ran)
 
     def put(whole, part):
@@ -129,7 +135,7 @@ def merge_members(states, members: np.ndarray, ran):
     return jax.tree.map(put, states, ran)
 
 
-def trial_records(log: rollout.TrialBuffer, members: np.ndarray, chunk: int) -> dict[str, np.ndarray]:
+def trial_records(log: trial_log.TrialBuffer, members: np.ndarray, chunk: int) -> dict[str, np.ndarray]:
     """The per-trial log of a chunk as columns (`run_dir.trial_columns`): learner by learner, trials in order."""
     log = jax.device_get(log)
     counts = np.asarray(log.count)
@@ -156,7 +162,7 @@ def run(
     resume: bool = False,
     progress: bool = True,
     stream=None,
-    speed: rollout.Speed = rollout.DEFAULT_SPEED,
+    speed: Speed = DEFAULT_SPEED,
     devices=None,
 ) -> Path:
     """Train cfg.train's learners in chunks, logging and checkpointing into run_dir; returns run_dir.
@@ -171,7 +177,7 @@ def run(
         that already holds one (FileExistsError).
       resume: continue the run in run_dir from its newest checkpoint; cfg must equal its config.json.
       progress: draw a progress bar on `stream` (default stderr).
-      speed: how the compiled chunk runs (`rollout.Speed`); the defaults are what every committed run used.
+      speed: how the compiled chunk runs (`reach_jax.speed.Speed`); the defaults are what every committed run used.
       devices: devices to spread the learners over (default every device of every process).
     """
     run_dir = default_run_dir(cfg.train) if run_dir is None else Path(run_dir)
@@ -194,14 +200,14 @@ def run(
             run_dir_io.create(run_dir, cfg)
             run_dir_io.write_checkpoint(run_dir, chunk, group, cfg)
     budget = jnp.asarray(cfg.train.trials, jnp.int32)
-    run_chunk = rollout.make_chunk(cfg, cfg.train.chunk_steps, devices, speed)
+    run_chunk = make_chunk(cfg, cfg.train.chunk_steps, devices, speed)
     total = cfg.train.trials * len(table)
     bar = Progress(total, "trials", stream=stream) if progress and writer else None
     eta = LearnerEta(cfg.train.trials)
     started = time.monotonic()
 
     def unfinished(states) -> bool:
-        return int(np.min(np.asarray(states.counters.trials))) < cfg.train.trials
+        return int(np.min(np.asarray(states.env.trials))) < cfg.train.trials
 
     def dispatch(states, members, device_states=None):
         """Start the next chunk on the learners `members`; `device_states`, if given, already holds exactly them."""
@@ -217,7 +223,7 @@ def run(
         return run_chunk(device_states, plans, hypers, budget)
 
     states = jax.device_get(group.states)
-    members = chunk_members(np.asarray(states.counters.trials), cfg.train.trials)
+    members = chunk_members(np.asarray(states.env.trials), cfg.train.trials)
     running = None
     if unfinished(states):
         running = dispatch(states, members, group.states if len(members) == len(table) else None)
@@ -232,7 +238,7 @@ def run(
         ok = finite_learners(states)
         # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk.
         if ok.all() and unfinished(states):
-            following = chunk_members(np.asarray(states.counters.trials), cfg.train.trials)
+            following = chunk_members(np.asarray(states.env.trials), cfg.train.trials)
             # The devices already hold the learners of the next chunk unless the batch shrinks.
             reuse = finished if np.array_equal(following, members) else None
             members = following
@@ -253,7 +259,7 @@ def run(
                 run_dir_io.append_trials(run_dir, records)
             run_dir_io.write_checkpoint(run_dir, chunk, group, cfg)
         if bar:
-            done = np.asarray(states.counters.trials)
+            done = np.asarray(states.env.trials)
             left = eta.update(done, states.counters.steps, time.monotonic(), ran)
             bar.update(int(np.minimum(done, cfg.train.trials).sum()), status_line(rows), eta=left)
     if bar:

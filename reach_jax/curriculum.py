@@ -1,0 +1,80 @@
+"""The curriculum of start-target distances: its state, its bounds and its staircase (model §5).
+
+Units: distances [m], counts in trials. The distance d bounds the start-target offset in each axis (an L-inf box).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from reach_jax.config import Config
+
+
+@struct.dataclass
+class Curriculum:
+    """One learner's place on the staircase."""
+
+    distance: jax.Array  # () curriculum distance [m]
+    full_at: jax.Array  # () trials ended when the distance first reached its maximum; -1 before
+
+
+def bounds(cfg: Config) -> tuple[float, float]:
+    """(initial and minimum, maximum) curriculum distance [m]; the maximum spans the whole field."""
+    return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
+
+
+def initial(cfg: Config) -> Curriculum:
+    """The staircase before the first trial: the initial distance, full from the start only if that spans the field."""
+    distance, full = (jnp.asarray(b) for b in bounds(cfg))
+    return Curriculum(distance=distance, full_at=jnp.where(distance >= full, 0, -1).astype(jnp.int32))
+
+
+def staircase(
+    distance: jax.Array,
+    goal: jax.Array,
+    drifted: jax.Array,
+    was_full: jax.Array,
+    cfg: Config,
+    early: jax.Array = False,
+) -> jax.Array:
+    """Distance after a trial: grow after a success without drift, shrink after an out or a cap.
+
+    A drift-aided success also shrinks it, except once the curriculum has been full and
+    cfg.task.drift_neutral_when_full is set, or at any time when `early` is (hyper `drift_neutral_early`): then it
+    leaves the distance unchanged. A learner that needs the drift for some trials (a strong random force, little
+    exploration noise) keeps the whole field.
+
+    Args:
+      distance: () curriculum distance [m].
+      goal: () bool, the trial reached the goal.
+      drifted: () bool, the target drifted during the trial.
+      was_full: () bool, the distance has reached the whole field at some earlier trial.
+      cfg: model config.
+      early: () bool, a drift-aided success is neutral before the first full field too.
+    """
+    lo, hi = bounds(cfg)
+    neutral = goal & drifted & ((was_full & cfg.task.drift_neutral_when_full) | early)
+    step = jnp.where(goal & ~drifted, cfg.task.curriculum_step, jnp.where(neutral, 0.0, -cfg.task.curriculum_step))
+    return jnp.clip(distance + step, lo, hi)
+
+
+def after_step(
+    cur: Curriculum, ended: jax.Array, goal: jax.Array, drifted: jax.Array, trials: jax.Array, cfg: Config, early
+) -> Curriculum:
+    """The staircase after a step: moved if the step ended a trial, with the trial count when it first got full.
+
+    Args:
+      cur: the staircase before the step.
+      ended: () bool, the step ended a trial.
+      goal: () bool, at the goal.
+      drifted: () bool, the ended trial's target drifted.
+      trials: () int32 trials ended before this step.
+      cfg: model config.
+      early: () bool, hyper `drift_neutral_early`.
+    """
+    was_full = cur.full_at >= 0
+    distance = jnp.where(ended, staircase(cur.distance, goal, drifted, was_full, cfg, early), cur.distance)
+    first_full = ~was_full & (distance >= bounds(cfg)[1])
+    return Curriculum(distance=distance, full_at=jnp.where(first_full, trials + ended, cur.full_at))

@@ -1,0 +1,58 @@
+"""Reading what older code wrote: each migration of `reach_jax.compat` against the names and values it stored."""
+
+from __future__ import annotations
+
+import pytest
+
+from reach_jax import compat
+from reach_jax.config import from_dict, to_dict
+
+
+@pytest.mark.parametrize(
+    ("name", "grouped", "flat"),
+    [
+        ("env.trial.arm", "env.arm", "arm"),
+        ("env.trial.drifted", "env.drifted", "drifted"),
+        ("env.trials", "counters.trials", "trials"),
+        ("env.curriculum.full_at", "curriculum.full_at", "full_at"),
+        ("env.block.index", "block.index", "block"),
+        ("env.block.learning", "block.learning", "learning"),
+        ("env.cond.input_mask", "cond.input_mask", "cond.input_mask"),
+        ("counters.stats.goals", "counters.stats.goals", "stats.goals"),
+        ("agent.n_max", "agent.n_max", "n_max"),
+        (
+            "agent.params['params']['Dense_0']['bias']",
+            "agent.params['params']['Dense_0']['bias']",
+            "params['params']['Dense_0']['bias']",
+        ),
+        ("key", "key", "key"),
+    ],
+)
+def test_format_2_names_of_each_state_field_in_both_of_its_layouts(name, grouped, flat):
+    """Format 2 kept the environment's fields beside the agent's (grouped), or, first, without groups (flat)."""
+    states = "['states']."
+    assert compat.state_aliases(states + name, 2) == (states + grouped, states + flat)
+    assert compat.state_aliases(states + name, compat.CHECKPOINT_VERSION) == ()
+    assert compat.state_aliases("['hypers'].lr", 2) == ()
+
+
+def test_fields_that_the_first_layout_lacks_are_the_ones_a_fresh_batch_fills():
+    assert compat.is_added_state_field("['states'].env.cond.field.viscous")
+    assert compat.is_added_state_field("['states'].env.block.index")
+    assert compat.is_added_state_field("['states'].agent.pending_learning")
+    assert not compat.is_added_state_field("['states'].env.trial.arm")
+    assert not compat.is_added_state_field("['states'].agent.params['params']['Dense_0']['bias']")
+
+
+def test_a_retired_speed_field_is_dropped_and_a_force_section_becomes_the_conditions():
+    stored = to_dict(from_dict({"version": 1}))
+    del stored["conditions"]  # configs of that time had none
+    stored["train"]["hidden_pad"] = 32
+    stored["force"] = {"viscous": [[-1.0, -2.0], [-2.0, 3.0]], "random_amplitude": 4.0}
+    cfg = from_dict(stored)
+    by_name = {c.name: c for c in cfg.conditions}
+    assert by_name["viscous"].viscous == ((-1.0, -2.0), (-2.0, 3.0))
+    assert by_name["random"].random == by_name["random_nopast"].random == (4.0, 4.0)
+    assert compat.retired("train", "hidden_pad") and not compat.retired("train", "trials")
+    with pytest.raises(ValueError, match="force.spring: unknown field"):
+        from_dict({"version": 1, "force": {"spring": 1.0}})
