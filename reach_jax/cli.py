@@ -32,6 +32,7 @@ from reach_jax.config import (
     to_dict,
     to_json,
     tuplify,
+    with_defaults,
 )
 from reach_jax.errors import OneLineError, printable
 from reach_jax.speed import DEFAULT_SPEED, MAX_HIDDEN_PAD, Speed
@@ -259,8 +260,15 @@ def read_config_file(path: Path) -> dict:
         raise UsageError(f"--config {path}: unreadable ({exc})") from None
     if not isinstance(data, dict):
         raise UsageError(f"--config {path}: expected a JSON object")
-    # A hand-written file may leave the version out; it then means the current one.
-    return {"version": CONFIG_VERSION, **data}
+    return data
+
+
+def _checked_config(data: dict) -> Config:
+    """Config of --config data with the settings applied: without a version (or of the current one) the fields
+    given over the defaults, of an older version migrated as a stored config is."""
+    if data.get("version", CONFIG_VERSION) == CONFIG_VERSION:
+        data = with_defaults(data)
+    return from_dict(data)
 
 
 def _with_settings(data: dict, args) -> dict:
@@ -296,7 +304,7 @@ def build_config(args) -> Config:
     """Config from --config (else the defaults), the --set values and the training flags, checked by from_dict."""
     data = read_config_file(args.config) if args.config is not None else to_dict(Config())
     try:
-        return from_dict(_with_settings(data, args))
+        return _checked_config(_with_settings(data, args))
     except (TypeError, ValueError) as exc:
         raise UsageError(str(exc)) from None
 
@@ -332,7 +340,7 @@ def validate(args: argparse.Namespace) -> Invocation:
                 raise UsageError(f"--{flag} cannot be combined with --resume (the run's config.json holds it)")
         cfg = run_dir_io.read_config(args.resume)
         try:
-            asked = from_dict(_with_settings(to_dict(cfg), args))
+            asked = _checked_config(_with_settings(to_dict(cfg), args))
         except (TypeError, ValueError) as exc:
             raise UsageError(str(exc)) from None
         diff = first_difference(cfg, asked)

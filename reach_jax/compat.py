@@ -8,6 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
+READABLE_CONFIGS = (1, 2)  # `config.CONFIG_VERSION` is the last
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
 # results (`reach_jax.speed.Speed`). Reading drops them, so those runs still load and resume.
@@ -62,13 +63,25 @@ def drop_retired(section: str, raw):
     return {k: v for k, v in raw.items() if not retired(section, k)}
 
 
-def migrate_config(data: dict) -> dict:
-    """A stored config dict in today's layout: retired fields dropped, an old `force` section as conditions.
+def migrate_config(data: dict, version: int) -> dict:
+    """A stored config dict (without its version) in the layout of the current version.
 
-    Configs stored before conditions were data held the viscous matrix and the random-force bound in a `force`
-    section; they become the fields of the paper's viscous, random and random_nopast conditions.
+    Version 1 configs left out the fields added during that version's life; each was added with the value that
+    keeps the earlier behaviour, and `config.from_dict` fills it so, except `task.drift_neutral_when_full`, which
+    came in switched on: a config without it trained under the old staircase, so it reads as False. Version 1 also
+    covers the speed fields dropped since (RETIRED_FIELDS) and the `force` section of the time before conditions
+    were data.
     """
+    if version != 1:
+        return data
     data = {k: drop_retired(k, v) for k, v in data.items()}
+    task = data.get("task", {})
+    if isinstance(task, dict) and "drift_neutral_when_full" not in task:
+        data["task"] = {**task, "drift_neutral_when_full": False}
+    return _force_as_conditions(data)
+
+
+def _force_as_conditions(data: dict) -> dict:
     if "force" not in data:
         return data
     force = data.pop("force")

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from reach_jax import compat, hyper
 from reach_jax.errors import printable
 
-CONFIG_VERSION = 1
+CONFIG_VERSION = 2  # 2: a stored config holds every field; 1: older layouts (`compat.migrate_config`)
 
 
 @dataclass(frozen=True)
@@ -297,12 +297,18 @@ def _coerce(value, default):
     return float(value) if isinstance(default, float) else value
 
 
-def _build(cls, raw, where: str, base=None):
-    """cls with the fields of the JSON object `raw` written over `base` (default cls()), each checked by type."""
+def _build(cls, raw, where: str, base=None, complete: bool = False):
+    """cls with the fields of the JSON object `raw` written over `base` (default cls()), each checked by type.
+
+    With `complete`, a field that `raw` lacks is an error: a stored config of the current version holds them all.
+    """
     if not isinstance(raw, dict):
         raise ValueError(f"{where}: expected an object")
     base = cls() if base is None else base
     names = {g.name for g in dataclasses.fields(cls)}
+    missing = sorted(names - set(raw) - {"name"}) if complete else []
+    if missing:
+        raise ValueError(f"{where}.{missing[0]}: missing (a version-{CONFIG_VERSION} config stores every field)")
     values = {}
     for key, value in raw.items():
         if key not in names or key == "name":
@@ -313,17 +319,18 @@ def _build(cls, raw, where: str, base=None):
     return dataclasses.replace(base, **values)
 
 
-def _conditions(raw, table: dict) -> tuple[ConditionConfig, ...]:
+def _conditions(raw, table: dict, complete: bool) -> tuple[ConditionConfig, ...]:
     """The conditions table: the paper's four, with the entries of `raw` ({name: fields}) added or changed."""
     if not isinstance(raw, dict):
         raise ValueError("conditions: expected an object of name: fields")
     for name, fields in raw.items():
         _check_name(f"conditions.{printable(name)}", name)
-        table[name] = _build(ConditionConfig, fields, f"conditions.{name}", table.get(name, ConditionConfig(name)))
+        base = table.get(name, ConditionConfig(name))
+        table[name] = _build(ConditionConfig, fields, f"conditions.{name}", base, complete)
     return tuple(table.values())
 
 
-def _protocols(raw) -> tuple[ProtocolConfig, ...]:
+def _protocols(raw, complete: bool) -> tuple[ProtocolConfig, ...]:
     """The protocols table: the shipped ones, with the entries of `raw` ({name: [blocks]}) added or replaced."""
     if not isinstance(raw, dict):
         raise ValueError("protocols: expected an object of name: [blocks]")
@@ -333,7 +340,7 @@ def _protocols(raw) -> tuple[ProtocolConfig, ...]:
         _check_name(where, name)
         if not isinstance(blocks, (list, tuple)) or not blocks:
             raise ValueError(f"{where}: expected a list of blocks")
-        built = tuple(_build(BlockConfig, b, f"{where}[{i}]") for i, b in enumerate(blocks))
+        built = tuple(_build(BlockConfig, b, f"{where}[{i}]", complete=complete) for i, b in enumerate(blocks))
         table[name] = ProtocolConfig(name, built)
     return tuple(table.values())
 
@@ -343,26 +350,63 @@ def _check_name(where: str, name: str) -> None:
         raise ValueError(f"{where}: a name needs letters, without commas or spaces")
 
 
-def from_dict(data: dict) -> Config:
-    """Rebuild a Config from `to_dict` output; raises ValueError naming a bad or unknown field.
+def with_defaults(fields: dict) -> dict:
+    """A complete config dict of the current version: the given fields (a hand-written file, say) over the defaults.
 
-    Fields that are left out keep their defaults; a condition given in `conditions` is added to the paper's
-    four, or changes the fields it names of one of them.
+    Sections merge field by field, conditions entry by entry and field by field, and a protocol given replaces
+    one, its blocks' missing fields at their defaults. A "version" among the fields is ignored.
+    """
+    data = to_dict(Config())
+    condition_defaults = {k: v for k, v in dataclasses.asdict(ConditionConfig()).items() if k != "name"}
+    block_defaults = dataclasses.asdict(BlockConfig())
+    for key, value in fields.items():
+        if key == "version":
+            continue
+        if not isinstance(value, dict) or not isinstance(data.get(key), dict):
+            data[key] = value
+        elif key == "conditions":
+            for name, entry in value.items():
+                old = data["conditions"].get(name, condition_defaults)
+                data["conditions"][name] = {**old, **entry} if isinstance(entry, dict) else entry
+        elif key == "protocols":
+            for name, blocks in value.items():
+                whole = isinstance(blocks, (list, tuple)) and all(isinstance(b, dict) for b in blocks)
+                data["protocols"][name] = [{**block_defaults, **b} for b in blocks] if whole else blocks
+        else:
+            data[key] = {**data[key], **value}
+    return data
+
+
+def from_partial(fields: dict) -> Config:
+    """Config from a few fields, the rest at today's defaults (`with_defaults`); raises ValueError like from_dict."""
+    return from_dict(with_defaults(fields))
+
+
+def from_dict(data: dict) -> Config:
+    """Rebuild a Config from `to_dict` output; raises ValueError naming a bad, unknown or missing field.
+
+    A config of the current version holds every field; one of an older version is migrated first
+    (`compat.migrate_config`), its fields added since taking the values that reproduce what it trained with. A
+    condition given in `conditions` is added to the paper's four, or changes one of them; `from_partial` builds a
+    config from a few fields.
     """
     data = dict(data)
     version = data.pop("version", None)
-    if version != CONFIG_VERSION:
-        raise ValueError(f"version: expected {CONFIG_VERSION}, found {version}")
-    data = compat.migrate_config(data)
+    if version not in compat.READABLE_CONFIGS:
+        readable = " or ".join(map(str, compat.READABLE_CONFIGS))
+        raise ValueError(f"version: expected {readable}, found {printable(str(version))}")
+    complete = version == CONFIG_VERSION
+    data = compat.migrate_config(data, version)
     table = {c.name: c for c in PAPER_CONDITIONS}
     sections = {}
     for f in dataclasses.fields(Config):
         if f.name in ("conditions", "protocols"):
             continue
-        raw = data.pop(f.name, {})
-        sections[f.name] = _build(f.default_factory, raw, f.name)
-    conditions = _conditions(data.pop("conditions", {}), table)
-    protocols = _protocols(data.pop("protocols", {}))
+        if complete and f.name not in data:
+            raise ValueError(f"{f.name}: missing (a version-{CONFIG_VERSION} config stores every field)")
+        sections[f.name] = _build(f.default_factory, data.pop(f.name, {}), f.name, complete=complete)
+    conditions = _conditions(data.pop("conditions", {}), table, complete)
+    protocols = _protocols(data.pop("protocols", {}), complete)
     if data:
         raise ValueError(f"{printable(sorted(data)[0])}: unknown field")
     _check_learner(sections["learner"])
@@ -477,7 +521,7 @@ def blocks_of(cfg: Config, name: str) -> tuple[BlockConfig, ...]:
 
 def protocol_trials(raw_protocols: dict, name: str) -> int:
     """Trials that protocol `name` lasts, in the shipped table with the JSON entries `raw_protocols` written over it."""
-    for p in _protocols(raw_protocols):
+    for p in _protocols(raw_protocols, False):
         if p.name == name:
             return sum(b.trials for b in p.blocks)
-    raise ValueError(f"unknown protocol {name!r}; choose from {', '.join(p.name for p in _protocols(raw_protocols))}")
+    raise ValueError(f"unknown protocol {name!r}; choose from {', '.join(p.name for p in _protocols(raw_protocols, False))}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from reach_jax import compat
-from reach_jax.config import from_dict, to_dict
+from reach_jax.config import CONFIG_VERSION, Config, from_dict, from_partial, to_dict, with_defaults
 
 
 @pytest.mark.parametrize(
@@ -44,8 +44,8 @@ def test_fields_that_the_first_layout_lacks_are_the_ones_a_fresh_batch_fills():
     assert not compat.is_added_state_field("['states'].agent.params['params']['Dense_0']['bias']")
 
 
-def test_a_retired_speed_field_is_dropped_and_a_force_section_becomes_the_conditions():
-    stored = to_dict(from_dict({"version": 1}))
+def test_version_1_a_retired_speed_field_is_dropped_and_a_force_section_becomes_the_conditions():
+    stored = {**to_dict(Config()), "version": 1}
     del stored["conditions"]  # configs of that time had none
     stored["train"]["hidden_pad"] = 32
     stored["force"] = {"viscous": [[-1.0, -2.0], [-2.0, 3.0]], "random_amplitude": 4.0}
@@ -56,3 +56,38 @@ def test_a_retired_speed_field_is_dropped_and_a_force_section_becomes_the_condit
     assert compat.retired("train", "hidden_pad") and not compat.retired("train", "trials")
     with pytest.raises(ValueError, match="force.spring: unknown field"):
         from_dict({"version": 1, "force": {"spring": 1.0}})
+
+
+def test_version_1_fields_added_since_read_as_what_those_runs_trained_with():
+    stored = {**to_dict(Config()), "version": 1}
+    del stored["task"]["drift_neutral_when_full"]  # came in switched on: before it, the old staircase
+    del stored["learner"]["noise_corr"]  # came in neutral
+    cfg = from_dict(stored)
+    assert cfg.task.drift_neutral_when_full is False
+    assert cfg.learner.noise_corr == Config().learner.noise_corr
+    stored["task"]["drift_neutral_when_full"] = True
+    assert from_dict(stored) == Config()
+
+
+@pytest.mark.parametrize(
+    ("section", "field"), [("task", "drift_neutral_when_full"), ("learner", "noise_corr"), ("train", "seeds")]
+)
+def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, field):
+    stored = to_dict(Config())
+    assert stored["version"] == CONFIG_VERSION
+    del stored[section][field]
+    with pytest.raises(ValueError, match=f"^{section}.{field}: missing"):
+        from_dict(stored)
+    blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
+    with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
+        from_dict(blocks)
+    with pytest.raises(ValueError, match="^version: expected 1 or 2, found 0"):
+        from_dict({**to_dict(Config()), "version": 0})
+
+
+def test_a_partial_config_takes_the_current_defaults_for_what_it_leaves_out():
+    cfg = from_partial({"task": {"goal_speed": 0.2}, "protocols": {"p": [{"trials": 5, "condition": "viscous"}]}})
+    assert cfg.task.goal_speed == 0.2 and cfg.task.drift_neutral_when_full is True
+    assert cfg.learner == Config().learner
+    assert [b.catch for b in next(p for p in cfg.protocols if p.name == "p").blocks] == [0.0]
+    assert with_defaults({"version": 1})["version"] == CONFIG_VERSION

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -11,14 +12,13 @@ import pytest
 
 from reach_jax import claims, cli, evaluate, task
 from reach_jax import run_dir as run_dir_io
-from reach_jax.config import PAPER_CONDITIONS, Config, condition, from_dict, to_dict
+from reach_jax.config import PAPER_CONDITIONS, Config, TaskConfig, condition, from_dict, from_partial, to_dict
 
 CURL = [[0.0, 13.0], [-13.0, 0.0]]  # [N s/m], a curl field: the force turns the hand velocity by 90 degrees
 
 
 def test_a_user_condition_is_added_to_the_paper_four_and_round_trips():
-    data = {"version": 1, "conditions": {"curl": {"viscous": CURL}, "viscous": {"constant": [1, 2]}}}
-    cfg = from_dict(data)
+    cfg = from_partial({"conditions": {"curl": {"viscous": CURL}, "viscous": {"constant": [1, 2]}}})
     assert [c.name for c in cfg.conditions] == ["none", "viscous", "random", "random_nopast", "curl"]
     assert condition(cfg, "curl").viscous == ((0.0, 13.0), (-13.0, 0.0))
     # A field given for a paper condition changes that field only.
@@ -31,9 +31,10 @@ def test_a_user_condition_is_added_to_the_paper_four_and_round_trips():
 
 
 def test_a_stored_force_section_becomes_the_paper_conditions_fields():
-    # Configs written before conditions were data held the viscous matrix and the random bound in `force`.
+    # Configs written before conditions were data held the viscous matrix and the random bound in `force`; they
+    # came before the drift-neutral staircase too.
     old = {"version": 1, "force": {"viscous": [[-10.1, -11.2], [-11.2, 11.1]], "random_amplitude": 8.0}}
-    assert from_dict(old) == Config()
+    assert from_dict(old) == dataclasses.replace(Config(), task=TaskConfig(drift_neutral_when_full=False))
     changed = from_dict({"version": 1, "force": {"random_amplitude": 5.0}})
     assert condition(changed, "random").random == (5.0, 5.0) == condition(changed, "random_nopast").random
 

@@ -18,7 +18,7 @@ import pytest
 from conftest import default_hyper
 
 from reach_jax import arm, curriculum, encoding, env, fields, learner, network, protocol, random_stream, sensor, task
-from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_dict
+from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_partial
 from reach_jax.learner_state import init_learner
 from reach_jax.testing import reference
 from reach_jax.testing.trace import make_trace
@@ -524,9 +524,8 @@ ROLLOUT_STEPS = 200
 # The protocol switches blocks, turns learning off for a block and draws catch trials in two of them; the "mixed"
 # condition has the viscous field and a random per-trial force at once, with every input kept (the spring and
 # constant terms are checked step by step in test_dsdt_and_rk4_match_oracle; with them no trial reaches the goal).
-ROLLOUT_CFG = from_dict(
+ROLLOUT_CFG = from_partial(
     {
-        "version": 1,
         "task": {"max_trial_time": 1.2},
         "conditions": {"mixed": {"viscous": [list(r) for r in VISCOUS], "random": [8.0, 8.0]}},
         "protocols": {

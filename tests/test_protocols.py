@@ -14,7 +14,7 @@ import pytest
 from reach_jax import adaptation, batch, checkpoint, cli, evaluate, protocol, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.chunk import make_chunk
-from reach_jax.config import condition, from_dict
+from reach_jax.config import condition, from_partial
 
 SWITCH = [
     {"trials": 7, "condition": "none"},
@@ -26,9 +26,8 @@ SWITCH = [
 def config(blocks, trials=None, **train):
     """A config whose learners run the protocol `blocks` (named "p"), with 0.2 s trials, logging every trial."""
     total = sum(b["trials"] for b in blocks)
-    return from_dict(
+    return from_partial(
         {
-            "version": 1,
             "task": {"max_trial_time": 0.2},
             "protocols": {"p": blocks},
             "train": {
@@ -197,9 +196,8 @@ def test_bad_protocols_are_one_line_errors(setting, needle, tmp_path, capsys):
 def synthetic_log(effects: dict, n_networks: int, rng, per_block: int = 3000) -> tuple[dict, list]:
     """A per-trial log whose field-aligned errors follow `effects` (cm per window), with noise, for the shipped
     adaptation protocol shortened to `per_block` trials a block."""
-    cfg = from_dict(
+    cfg = from_partial(
         {
-            "version": 1,
             "protocols": {
                 "adaptation": [
                     {"trials": per_block, "condition": "none"},
@@ -268,7 +266,7 @@ def test_the_adaptation_verdicts_follow_the_errors():
 
 
 def test_field_sign_points_along_the_push():
-    curl = from_dict({"version": 1, "conditions": {"curl": {"viscous": [[0, 13], [-13, 0]]}}})
+    curl = from_partial({"conditions": {"curl": {"viscous": [[0, 13], [-13, 0]]}}})
     aim = np.linspace(-np.pi, np.pi, 17)
     # A curl field F = B v with B = [[0, 13], [-13, 0]] pushes every movement to its right.
     np.testing.assert_array_equal(adaptation.field_sign(aim, condition(curl, "curl")), -1.0)

@@ -20,7 +20,7 @@ from reach_jax import checkpoint, cli, compat, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.chunk import make_chunk
 from reach_jax.cli import error_line
-from reach_jax.config import BlockConfig, ConditionConfig, Config, TrainConfig, from_dict, to_dict
+from reach_jax.config import CONFIG_VERSION, BlockConfig, ConditionConfig, Config, TrainConfig, from_dict, to_dict
 from reach_jax.errors import printable
 from reach_jax.speed import MAX_HIDDEN_PAD, Speed
 
@@ -114,17 +114,21 @@ def assert_resumes_to(uninterrupted: Path, out: Path, *flags: str) -> None:
 
 def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(uninterrupted, tmp_path):
     out, older = older_copy(uninterrupted, tmp_path)
-    # Written before `train.keep_every` existed: neither the config file nor the checkpoint names it.
-    edit_config(out, lambda data: data["train"].pop("keep_every"))
-    edit_meta(older, lambda meta: meta["config"]["train"].pop("keep_every"))
+    # Written (by config version 1) before `train.keep_every` existed: neither the config file nor the checkpoint
+    # names it.
+    edit_config(out, lambda data: (data["train"].pop("keep_every"), data.update(version=1)))
+    edit_meta(older, lambda meta: (meta["config"]["train"].pop("keep_every"), meta["config"].update(version=1)))
     assert_resumes_to(uninterrupted, out)
+    # A config of the current version that lacks a field is refused, naming it.
+    edit_config(out, lambda data: data.update(version=CONFIG_VERSION))
+    assert cli.train_main(["--resume", str(out), "--quiet"]) == cli.EXIT_USAGE
 
 
 def test_a_run_that_stored_the_retired_hidden_pad_resumes_with_another_pad_bit_identically(uninterrupted, tmp_path):
     out, older = older_copy(uninterrupted, tmp_path)
     # Runs made before the speed settings left the config stored train.hidden_pad = 8.
-    edit_config(out, lambda data: data["train"].update(hidden_pad=8))
-    edit_meta(older, lambda meta: meta["config"]["train"].update(hidden_pad=8))
+    edit_config(out, lambda data: data["train"].update(hidden_pad=8) or data.update(version=1))
+    edit_meta(older, lambda meta: meta["config"]["train"].update(hidden_pad=8) or meta["config"].update(version=1))
     assert_resumes_to(uninterrupted, out, "--hidden-pad", "1")
 
 
