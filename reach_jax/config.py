@@ -521,7 +521,8 @@ def blocks_of(cfg: Config, name: str) -> tuple[BlockConfig, ...]:
 
 def protocol_trials(raw_protocols: dict, name: str) -> int:
     """Trials that protocol `name` lasts, in the shipped table with the JSON entries `raw_protocols` written over it."""
-    for p in _protocols(raw_protocols, False):
+    table = _protocols(raw_protocols, False)
+    for p in table:
         if p.name == name:
             return sum(b.trials for b in p.blocks)
-    raise ValueError(f"unknown protocol {name!r}; choose from {', '.join(p.name for p in _protocols(raw_protocols, False))}")
+    raise ValueError(f"unknown protocol {name!r}; choose from {', '.join(p.name for p in table)}")

@@ -134,7 +134,7 @@ def run_episodes(policy, params, masks, fields, starts, targets, cfg: Config) ->
       policy: (params, Obs) -> (2,) torque [N m]; must be hashable (a module-level or cached function).
       params: policy parameters with a leading network axis N.
       masks: (N, 125) input masks of the networks' learning conditions.
-      fields: the hand-force fields of the C test conditions, stacked (`evaluate.test_fields`).
+      fields: the hand-force fields of the C test conditions, stacked (`evaluate.lattice.test_fields`).
       starts: (P, 2) start positions [m].
       targets: (P, 2) target positions [m].
       cfg: model config.

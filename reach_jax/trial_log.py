@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from reach_jax import arm
+from reach_jax import arm, geometry
 from reach_jax.config import Config
 from reach_jax.outcomes import FAIL, OUT, SUCCESS
 
@@ -42,10 +42,6 @@ class TrialTrace:
     direction: jax.Array  # () signed direction error at train.direction_time [rad]; 0 before
 
 
-def _cross(a: jax.Array, b: jax.Array) -> jax.Array:
-    return a[0] * b[1] - a[1] * b[0]
-
-
 def start_trace(start_state: jax.Array, target: jax.Array, cfg: Config) -> TrialTrace:
     """Trace of a trial that starts at arm state `start_state` (4,) toward `target` (2,) [m]."""
     hand = arm.hand_position(start_state[:2], cfg.arm)
@@ -61,10 +57,10 @@ def advance(trace: TrialTrace, hand: jax.Array, hand_vel: jax.Array, t: jax.Arra
     moved = hand - trace.start
     faster = speed > trace.peak_speed
     at_direction = t == max(round(cfg.train.direction_time / cfg.arm.dt), 1)
-    direction = jnp.arctan2(_cross(trace.aim, moved), jnp.dot(trace.aim, moved))
+    direction = jnp.arctan2(geometry.perpendicular(trace.aim, moved), jnp.dot(trace.aim, moved))
     return trace.replace(
         peak_speed=jnp.where(faster, speed, trace.peak_speed),
-        perp=jnp.where(faster, _cross(trace.aim, moved), trace.perp),
+        perp=jnp.where(faster, geometry.perpendicular(trace.aim, moved), trace.perp),
         direction=jnp.where(at_direction, direction, trace.direction),
     )
 

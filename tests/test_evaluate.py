@@ -22,6 +22,7 @@ from reach_jax import (
     cli,
     episodes,
     evaluate,
+    geometry,
     network,
     outcomes,
     panels,
@@ -261,6 +262,17 @@ def test_aftereffect_pulls_are_displacements_from_the_matched_path():
     assert got["fraction_b_with_force"] == 1.0 and got["fraction_c_against_force"] == 1.0
     against = evaluate.aftereffect(paths, starts, targets, np.zeros(m, int), -curl)
     assert against["fraction_b_with_force"] == 0.0 and against["fraction_c_against_force"] == 0.0
+
+
+def test_perpendicular_is_left_positive_on_numpy_and_in_jitted_jax():
+    rng = np.random.default_rng(0)
+    aim = geometry.unit(rng.normal(size=(50, 2))).astype(np.float32)
+    rel = rng.normal(size=(50, 2)).astype(np.float32)
+    want = geometry.perpendicular(aim, rel)
+    # One pair at a time, as in the training step; XLA may fuse the multiply-subtract, so only float32-close.
+    got = jax.jit(jax.vmap(geometry.perpendicular))(jnp.asarray(aim), jnp.asarray(rel))
+    np.testing.assert_allclose(np.asarray(got), want, rtol=1e-5, atol=1e-6)
+    assert geometry.perpendicular(np.array([1.0, 0.0]), np.array([0.3, 0.2])) == 0.2  # left of +x is +y
 
 
 def test_quality_measures_on_known_profiles():

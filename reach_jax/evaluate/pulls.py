@@ -1,0 +1,149 @@
+"""The after-effect of Fig. 4 as pull vectors and line deviations, pooled over seeds; lengths [m], angles [deg].
+
+Directions are measured counter-clockwise from +x. Hand paths are time-aligned and held at their end point once
+an episode ends (`episodes.Episode.hand`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from reach_jax import geometry, stats
+from reach_jax.panels import CORNER_NAMES
+
+
+def _deg(v: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arctan2(v[..., 1], v[..., 0]))
+
+
+def _angle_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.degrees(np.arccos(np.clip(np.sum(geometry.unit(u) * geometry.unit(v), axis=-1), -1.0, 1.0)))
+
+
+def _json_float(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _circular_mean_deg(v: np.ndarray) -> float | None:
+    u = geometry.unit(v)
+    u = u[np.all(np.isfinite(u), axis=-1)]
+    if len(u) == 0:
+        return None
+    m = u.mean(axis=0)
+    return _json_float(_deg(m)) if np.linalg.norm(m) > 0 else None
+
+
+def pull_vectors(path: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Largest time-aligned displacement of each path from its reference path: (M, T, 2) x2 -> (M, 2) [m]."""
+    d = path - reference
+    k = np.argmax(np.linalg.norm(d, axis=-1), axis=-1)
+    return d[np.arange(len(d)), k]
+
+
+def line_deviation(path: np.ndarray, starts: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Signed largest perpendicular deviation from the start-target line, + to the left of travel: (M,) [m].
+
+    Args:
+      path: (M, T, 2) hand paths [m] (held at their end point after the episode ends).
+      starts, targets: (M, 2) [m].
+    """
+    side = geometry.perpendicular(geometry.unit(targets - starts)[:, None], path - starts[:, None])
+    k = np.argmax(np.abs(side), axis=-1)
+    return side[np.arange(len(side)), k]
+
+
+def aftereffect(
+    paths: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np.ndarray, field: np.ndarray
+) -> dict:
+    """Direction of the pull in Fig. 4 (b) and (c), and the angle between them.
+
+    The pull of a movement in (b) (no-field network, field on) is the hand's displacement from the same
+    network's path for the same movement in (a) (field off), taken at the time when it is largest; the
+    paths are time-aligned and held at their end point once an episode ends. The pull in (c) (field-trained
+    network, field removed) is likewise the displacement from its path in (d) (field on). Each pull is a
+    2-D vector, reported as a direction [deg, counter-clockwise from +x] and a size [m]; the angle between
+    the pulls of (b) and (c) of the same movement lies in [0, 180] deg. The mean angle is the mean of the
+    per-movement angles; `mean_direction_deg` is the direction of each panel's mean unit pull vector.
+    For the classic sign test we also give model §9's line measure: the signed largest perpendicular
+    deviation from the straight start-target line (+ = left of the direction of travel) in (b) and (c).
+    The field's force on a movement is taken as field @ (target - start): the direction of F = B xdot on a
+    straight movement, whatever its speed profile. A pull "with the force" is within 90 deg of it; the
+    after-effect in (c) should point against it.
+
+    Args:
+      paths: {"a"|"b"|"c"|"d": (M, T, 2) hand paths [m]} of one network per learning condition.
+      starts, targets: (M, 2) [m].
+      start_corner: (M,) index into CORNER_NAMES.
+      field: (2, 2) viscous field matrix of the test condition [N s/m].
+
+    Returns:
+      JSON-ready dict.
+    """
+    pull_b = pull_vectors(paths["b"], paths["a"])
+    pull_c = pull_vectors(paths["c"], paths["d"])
+    angle = _angle_between(pull_b, pull_c)
+    force = (targets - starts) @ np.asarray(field).T
+    b_to_force, c_to_force = _angle_between(pull_b, force), _angle_between(pull_c, force)
+    dev_b = line_deviation(paths["b"], starts, targets)
+    dev_c = line_deviation(paths["c"], starts, targets)
+    movements = []
+    for i in range(len(starts)):
+        movements.append(
+            {
+                "start_m": [float(v) for v in starts[i]],
+                "target_m": [float(v) for v in targets[i]],
+                "start_corner": CORNER_NAMES[int(start_corner[i])],
+                "pull_b_deg": _json_float(_deg(pull_b[i])),
+                "pull_b_m": float(np.linalg.norm(pull_b[i])),
+                "pull_c_deg": _json_float(_deg(pull_c[i])),
+                "pull_c_m": float(np.linalg.norm(pull_c[i])),
+                "angle_deg": _json_float(angle[i]),
+                "field_force_deg": _json_float(_deg(force[i])),
+                "pull_b_to_force_deg": _json_float(b_to_force[i]),
+                "pull_c_to_force_deg": _json_float(c_to_force[i]),
+                "line_deviation_b_m": float(dev_b[i]),
+                "line_deviation_c_m": float(dev_c[i]),
+            }
+        )
+    finite = angle[np.isfinite(angle)]
+    opposite = np.sign(dev_b) * np.sign(dev_c) < 0
+    return {
+        "movements": movements,
+        "mean_angle_deg": _json_float(finite.mean()) if len(finite) else None,
+        "mean_direction_deg": {"b": _circular_mean_deg(pull_b), "c": _circular_mean_deg(pull_c)},
+        "angle_between_mean_directions_deg": _json_float(
+            _angle_between(np.nanmean(geometry.unit(pull_b), axis=0), np.nanmean(geometry.unit(pull_c), axis=0))
+        ),
+        "fraction_opposite_line_deviation": float(opposite.mean()),
+        "mean_pull_b_to_force_deg": _json_float(np.nanmean(b_to_force)),
+        "mean_pull_c_to_force_deg": _json_float(np.nanmean(c_to_force)),
+        "fraction_b_with_force": float(np.mean(b_to_force < 90.0)),
+        "fraction_c_against_force": float(np.mean(c_to_force > 90.0)),
+    }
+
+
+def pool_aftereffect(per_seed: list[dict], level: float) -> dict:
+    """The after-effect measures of several seeds together: mean fractions, and the angle with its interval.
+
+    Args:
+      per_seed: `aftereffect` results, one per seed.
+      level: confidence level of the angle's t-interval.
+    """
+    if not per_seed:
+        return {}
+
+    def mean(key):
+        values = [a[key] for a in per_seed if a[key] is not None]
+        return float(np.mean(values)) if values else None
+
+    return {
+        "seeds": len(per_seed),
+        "fraction_b_with_force": mean("fraction_b_with_force"),
+        "fraction_c_against_force": mean("fraction_c_against_force"),
+        "mean_pull_b_to_force_deg": mean("mean_pull_b_to_force_deg"),
+        "mean_pull_c_to_force_deg": mean("mean_pull_c_to_force_deg"),
+        "angle_deg": stats.mean_ci([a["mean_angle_deg"] for a in per_seed if a["mean_angle_deg"] is not None], level),
+    }

@@ -1,0 +1,68 @@
+"""The claims of each recipe from the evaluation's results, with its impedance cells; gains [N/m], [N s/m].
+
+The glue between the measures (`lattice`, `pulls`, `impedance`) and the verdicts (`claims`, `stats`): both the
+full evaluation and `redecide` (from the committed eval/ files) decide through `decide`.
+"""
+
+from __future__ import annotations
+
+from reach_jax import claims, stats
+from reach_jax.evaluate import pulls
+
+
+def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
+    """Mean over networks (with its interval) of each network's median gains, per learning x test cell.
+
+    Args:
+      summary: `impedance.summarize` results.
+      nets: the networks to pool (indices into the learner table).
+      level: confidence level of the t-intervals.
+    """
+    rows = [r for r in summary["per_network"] if r["learner"] in nets]
+    names = [k for k in rows[0] if k.startswith(("stiffness_", "damping_", "passive_")) and "per_m" not in k]
+    cells = []
+    for learning, test in dict.fromkeys((r["learning"], r["test"]) for r in rows):
+        sub = [r for r in rows if r["learning"] == learning and r["test"] == test and r["states"] > 0]
+        cells.append(
+            {
+                "learning": learning,
+                "test": test,
+                **{n: stats.mean_ci([r[n]["median"] for r in sub], level) for n in names},
+            }
+        )
+    return cells
+
+
+def decide(
+    table: dict, per_seed: list[dict], imp: dict, recipes: list[dict], recipe_of: list[int], metrics: list[dict], cfg
+) -> list[dict]:
+    """The claims of each recipe, from the Table-2 counts, the after-effect per seed, the impedance and the metrics.
+
+    Args:
+      table: `lattice.table2` results (its per-network counts).
+      per_seed: the after-effect measures per (recipe, seed) (`pulls.aftereffect`).
+      imp: `impedance.summarize` results, each per-network row with its recipe.
+      recipes: each recipe's hyperparameters (`lattice.recipe_index`).
+      recipe_of: (N,) recipe index per network.
+      metrics: the run's metrics.jsonl rows up to the evaluated checkpoint.
+      cfg: model config.
+    """
+    level = cfg.claims.level
+    verdicts = []
+    for k, hypers in enumerate(recipes):
+        nets = [i for i in range(len(recipe_of)) if recipe_of[i] == k]
+        cells = claims.Cells([r for r in table["per_network"] if r["recipe"] == k], table["pairs_per_network"])
+        after_k = pulls.pool_aftereffect([a for a in per_seed if a["recipe"] == k], level)
+        verdicts.append(
+            {
+                "hypers": hypers,
+                "level": level,
+                "networks_per_condition": cfg.train.seeds,
+                "claims": claims.recipe_claims(cells, after_k, cfg),
+                "aftereffect": after_k,
+                "cells": claims.table_cells(cells, cfg.claims),
+                "impedance": impedance_cells(imp, nets, level),
+                "curriculum": claims.curriculum_stability(metrics, nets, cfg.train.trials, cfg),
+            }
+        )
+    return verdicts
