@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import batch, checkpoint, files, trial_log
+from reach_jax import batch, checkpoint, files, rollout, trial_log
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config, first_difference, from_dict, to_dict, to_json
 
@@ -31,6 +31,8 @@ ADDED_STATE_FIELDS = ("agent.pending_learning", "cond", "block")
 # Checkpoints written before LearnerState was split stored its fields flat: the groups' names were not in the paths.
 STATE_GROUPS = ("agent", "env", "curriculum", "counters")
 RENAMED_STATE_FIELDS = {"block.index": "block", "block.learning": "learning", "block.catch": "catch"}
+# The result-changing speed settings of checkpoints written before they were stored: every run had these.
+SPEED_BEFORE_STORED = {"sparse_layer1": True}
 
 
 def flat_state_name(name: str) -> str:
@@ -173,16 +175,41 @@ def truncate_trials(run_dir: Path, chunk: int) -> None:
             os.truncate(path, keep * np.dtype(dtype).itemsize)
 
 
-def write_checkpoint(run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config) -> Path:
-    """Save the learner states and hyperparameters after `chunk` chunks, with the config as the run's identity."""
+def speed_settings(speed: rollout.Speed) -> dict:
+    """The settings of `speed` that change results (`rollout.RESULT_FIELDS`), as a checkpoint stores them."""
+    return {name: getattr(speed, name) for name in rollout.RESULT_FIELDS}
+
+
+def write_checkpoint(
+    run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config, speed: rollout.Speed = rollout.DEFAULT_SPEED
+) -> Path:
+    """Save the learner states and hyperparameters after `chunk` chunks, with the config and the speed settings
+    that change results as the run's identity."""
     tree = {"states": learners.states, "hypers": learners.hypers}
-    return checkpoint.save(run_dir, chunk, tree, {"config": to_dict(cfg)}, cfg.train.keep_every)
+    meta = {"config": to_dict(cfg), "speed": speed_settings(speed)}
+    return checkpoint.save(run_dir, chunk, tree, meta, cfg.train.keep_every)
 
 
-def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[batch.Batch, int]:
+def check_speed(path: Path, meta: dict, speed: rollout.Speed) -> None:
+    """Raise CheckpointError if `speed` would change the results of the run that wrote checkpoint `path`."""
+    stored = meta.get("speed", {})
+    if not isinstance(stored, dict):
+        raise CheckpointError(f"{path}: field speed is not an object")
+    for name, wanted in speed_settings(speed).items():
+        made = stored.get(name, SPEED_BEFORE_STORED[name])
+        if made != wanted:
+            raise CheckpointError(
+                f"{path}: field speed.{name} is {made!r}; resuming with {wanted!r} would change the results"
+            )
+
+
+def load_batch(
+    run_dir: Path, cfg: Config, path: Path | None = None, speed: rollout.Speed | None = None
+) -> tuple[batch.Batch, int]:
     """Newest (or given) checkpoint of a run as a Batch, with its chunk index.
 
-    Raises CheckpointError when there is none, or when the config stored in it disagrees with `cfg`.
+    Raises CheckpointError when there is none, when the config stored in it disagrees with `cfg`, or when
+    `speed` (the speed to continue with; None: not checked) has another setting that changes results.
     """
     ckpts = checkpoint.list_checkpoints(run_dir)
     if path is None and not ckpts:
@@ -209,6 +236,8 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[ba
     diff = first_difference(stored, cfg)
     if diff:
         raise CheckpointError(f"{path}: field config.{diff} disagrees with {CONFIG_FILE}")
+    if speed is not None:
+        check_speed(path, meta, speed)
     states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
     return batch.Batch(states, fresh.conds, hypers, fresh.plans), int(meta["chunk"])
 
