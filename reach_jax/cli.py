@@ -19,7 +19,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from reach_jax import batch, compat, distribute, evaluate, hyper, train
+from reach_jax import compat, distribute, evaluate, hyper, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import (
@@ -312,11 +312,13 @@ def build_config(args) -> Config:
 class Invocation(NamedTuple):
     """A validated training command line."""
 
-    cfg: Config  # the run's config (the stored one when resuming)
-    run_dir: Path  # where the run lives
-    resume: bool  # continue from the newest checkpoint
+    prepared: train.Prepared  # the checked run (config: the stored one when resuming) and what it starts from
     quiet: bool  # no progress bar
-    speed: Speed  # how the compiled loop runs
+
+    @property
+    def cfg(self) -> Config:
+        """The run's config."""
+        return self.prepared.cfg
 
 
 def _first_existing(path: Path) -> Path:
@@ -332,7 +334,8 @@ def parse(argv=None) -> Invocation:
 
 
 def validate(args: argparse.Namespace) -> Invocation:
-    """Check parsed training arguments against the config and the file system; writes nothing."""
+    """Check parsed training arguments against the config and the file system, reading the checkpoint or source
+    networks the run starts from (once: `train.run` takes them from the Invocation); writes nothing."""
     speed = Speed(**({} if args.hidden_pad is None else {"hidden_pad": args.hidden_pad}))
     if args.resume is not None:
         for flag in ("out", "config"):
@@ -347,21 +350,18 @@ def validate(args: argparse.Namespace) -> Invocation:
         if diff:
             stored, wanted = (_field(c, diff) for c in (cfg, asked))
             raise CheckpointError(f"{args.resume / run_dir_io.CONFIG_FILE}: field {diff} is {stored!r}, not {wanted!r}")
-        run_dir_io.load_batch(args.resume, cfg)
-        return Invocation(cfg, args.resume, True, args.quiet, speed)
+        return Invocation(train.prepare(cfg, args.resume, resume=True, speed=speed), args.quiet)
     cfg = build_config(args)
-    if cfg.train.init_from:
-        try:
-            batch.source_indices(run_dir_io.load_networks(cfg)[1], cfg)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
     run_dir = args.out if args.out is not None else train.default_run_dir(cfg.train)
     existing = _first_existing(run_dir)
     if not existing.is_dir():
         raise UsageError(f"--out {run_dir}: {existing} is a file, not a directory")
     if run_dir_io.holds_run(run_dir):
         raise UsageError(f"--out {run_dir} already holds a run; use --resume {run_dir}")
-    return Invocation(cfg, run_dir, False, args.quiet, speed)
+    try:
+        return Invocation(train.prepare(cfg, run_dir, speed=speed), args.quiet)
+    except ValueError as exc:  # train.init_from lacks a network
+        raise UsageError(str(exc)) from None
 
 
 def _field(cfg: Config, dotted: str):
@@ -375,7 +375,7 @@ def _disagreement(inv: Invocation | None) -> UsageError | None:
     """Why a multi-process run must stop before process 0 writes: a process refused its command line (inv None
     there), or the processes were given different configs. Every process calls it after checking the run directory.
     """
-    mine = -1 if inv is None else zlib.crc32(f"{inv.resume} {to_json(inv.cfg)}".encode()) & 0x7FFFFFFF
+    mine = -1 if inv is None else zlib.crc32(f"{inv.prepared.resume} {to_json(inv.cfg)}".encode()) & 0x7FFFFFFF
     tokens = distribute.gather_processes(np.array([mine], np.int32))
     if (tokens == -1).any():
         return UsageError(f"process {int(np.argmax(tokens == -1))} of the multi-process run refused its command line")
@@ -417,7 +417,7 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
         if refused is not None:
             sys.stderr.write(error_line(prog, str(refused)))
             return EXIT_USAGE
-        train.run(inv.cfg, inv.run_dir, resume=inv.resume, progress=not inv.quiet, speed=inv.speed)
+        train.run(inv.prepared, progress=not inv.quiet)
     except train.NumericsError as exc:
         sys.stderr.write(error_line(prog, str(exc)))
         return EXIT_NUMERICS
@@ -428,7 +428,7 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
         sys.stderr.write(error_line(prog, f"write failed, last good checkpoint kept: {exc}"))
         return EXIT_IO
     if jax.process_index() == 0:
-        print(f"run written to {inv.run_dir}", file=sys.stderr)
+        print(f"run written to {inv.prepared.run_dir}", file=sys.stderr)
     return 0
 
 

@@ -24,6 +24,9 @@ _V2_FLAT_RENAMED = {"block.index": "block", "block.learning": "learning", "block
 # block 0, learning on), which is what those runs, made before protocols, trained with.
 ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "env.block")
 
+# The result-changing speed settings (`speed.RESULT_FIELDS`) of checkpoints written before they were stored.
+SPEED_BEFORE_STORED = {"sparse_layer1": True}
+
 _STATES = "['states']."
 
 

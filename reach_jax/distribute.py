@@ -17,7 +17,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax._src import xla_bridge
 from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
@@ -60,7 +59,15 @@ def available_cores() -> int:
 
 def jax_started() -> bool:
     """Whether JAX has created its backends, after which XLA_FLAGS and the CPU device count are fixed."""
-    return xla_bridge.backends_are_initialized()
+    # JAX has no public query for this (jax-ml/jax#23320); its config refuses a new CPU device count once the
+    # backends exist, so ask for one and put the old value back.
+    count = jax.config.jax_num_cpu_devices
+    try:
+        jax.config.update("jax_num_cpu_devices", count + 1)
+    except RuntimeError:
+        return True
+    jax.config.update("jax_num_cpu_devices", count)
+    return False
 
 
 @functools.cache

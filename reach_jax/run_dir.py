@@ -21,6 +21,7 @@ import numpy as np
 from reach_jax import batch, checkpoint, compat, files, trial_log
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config, first_difference, from_dict, to_dict, to_json
+from reach_jax.speed import DEFAULT_SPEED, RESULT_FIELDS, Speed
 
 CONFIG_FILE = "config.json"
 METRICS_FILE = "metrics.jsonl"
@@ -155,16 +156,41 @@ def truncate_trials(run_dir: Path, chunk: int) -> None:
             os.truncate(path, keep * np.dtype(dtype).itemsize)
 
 
-def write_checkpoint(run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config) -> Path:
-    """Save the learner states and hyperparameters after `chunk` chunks, with the config as the run's identity."""
+def speed_settings(speed: Speed) -> dict:
+    """The settings of `speed` that change results (`reach_jax.speed.RESULT_FIELDS`), as a checkpoint stores them."""
+    return {name: getattr(speed, name) for name in RESULT_FIELDS}
+
+
+def write_checkpoint(
+    run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config, speed: Speed = DEFAULT_SPEED
+) -> Path:
+    """Save the learner states and hyperparameters after `chunk` chunks, with the config and the speed settings
+    that change results as the run's identity."""
     tree = {"states": learners.states, "hypers": learners.hypers}
-    return checkpoint.save(run_dir, chunk, tree, {"config": to_dict(cfg)}, cfg.train.keep_every)
+    meta = {"config": to_dict(cfg), "speed": speed_settings(speed)}
+    return checkpoint.save(run_dir, chunk, tree, meta, cfg.train.keep_every)
 
 
-def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[batch.Batch, int]:
+def check_speed(path: Path, meta: dict, speed: Speed) -> None:
+    """Raise CheckpointError if `speed` would change the results of the run that wrote checkpoint `path`."""
+    stored = meta.get("speed", {})
+    if not isinstance(stored, dict):
+        raise CheckpointError(f"{path}: field speed is not an object")
+    for name, wanted in speed_settings(speed).items():
+        made = stored.get(name, compat.SPEED_BEFORE_STORED[name])
+        if made != wanted:
+            raise CheckpointError(
+                f"{path}: field speed.{name} is {made!r}; resuming with {wanted!r} would change the results"
+            )
+
+
+def load_batch(
+    run_dir: Path, cfg: Config, path: Path | None = None, speed: Speed | None = None
+) -> tuple[batch.Batch, int]:
     """Newest (or given) checkpoint of a run as a Batch, with its chunk index.
 
-    Raises CheckpointError when there is none, or when the config stored in it disagrees with `cfg`.
+    Raises CheckpointError when there is none, when the config stored in it disagrees with `cfg`, or when
+    `speed` (the speed to continue with; None: not checked) has another setting that changes results.
     """
     ckpts = checkpoint.list_checkpoints(run_dir)
     if path is None and not ckpts:
@@ -189,6 +215,8 @@ def load_batch(run_dir: Path, cfg: Config, path: Path | None = None) -> tuple[ba
     diff = first_difference(stored, cfg)
     if diff:
         raise CheckpointError(f"{path}: field config.{diff} disagrees with {CONFIG_FILE}")
+    if speed is not None:
+        check_speed(path, meta, speed)
     states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
     return batch.Batch(states, fresh.conds, hypers, fresh.plans), int(meta["chunk"])
 

@@ -9,8 +9,8 @@ MAX_HIDDEN_PAD = 128  # largest Speed.hidden_pad: a TPU vector row of float32; w
 
 @dataclass(frozen=True)
 class Speed:
-    """How the compiled loops run. None of it is stored with a run: results do not depend on it bit for bit,
-    except for `sparse_layer1`, which only the lever benchmark turns off.
+    """How the compiled loops run. Results do not depend on it bit for bit, except for `sparse_layer1`, which
+    only the lever benchmark turns off: a run stores that one (`RESULT_FIELDS`) and resumes only under it.
 
     `benchmarks/levers.py` measures what each one gives by switching it off.
     """
@@ -30,3 +30,4 @@ class Speed:
 
 
 DEFAULT_SPEED = Speed()
+RESULT_FIELDS = ("sparse_layer1",)  # the Speed fields that change results (float32 rounding)

@@ -27,27 +27,29 @@ def test_imports_leave_the_environment_and_jax_alone_and_setup_sets_the_flags():
     got = _child(
         """
         import json, os, warnings
+        import jax
         from reach_jax import cli, distribute, evaluate, figures, rollout, train
-        after_import = (os.environ.get("XLA_FLAGS"), distribute.jax_started())
+        after_import = (os.environ.get("XLA_FLAGS"), distribute.jax_started(), jax.config.jax_num_cpu_devices)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             rejected = distribute.add_xla_flags(("--xla_reach_jax_no_such_flag=1",))
         after_reject = os.environ.get("XLA_FLAGS")
         distribute.setup_backend(2)
-        import jax, jax.numpy as jnp
+        import jax.numpy as jnp
         total = float(jnp.arange(4.0).sum())
+        started = distribute.jax_started()
         print(json.dumps({
             "after_import": after_import, "rejected": rejected, "after_reject": after_reject,
             "warnings": [str(w.message) for w in caught], "flags": os.environ.get("XLA_FLAGS"),
-            "devices": len(jax.devices()), "total": total,
+            "devices": len(jax.devices()), "total": total, "started": started,
         }))
         """
     )
-    assert got["after_import"] == [None, False]
+    assert got["after_import"] == [None, False, -1]  # asking left the device count alone
     assert got["rejected"] is False and got["after_reject"] is None
     assert len(got["warnings"]) == 1 and "rejects" in got["warnings"][0] and "no_such_flag" in got["warnings"][0]
     assert got["flags"] == " ".join(distribute.CPU_XLA_FLAGS)
-    assert got["devices"] == 2 and got["total"] == 6.0
+    assert got["devices"] == 2 and got["total"] == 6.0 and got["started"] is True
 
 
 def test_flags_asked_for_after_jax_started_warn_and_change_nothing(monkeypatch):

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from reach_jax import checkpoint, cli, compat, train
+from reach_jax import batch, checkpoint, cli, compat, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.chunk import make_chunk
 from reach_jax.cli import error_line
@@ -140,6 +140,54 @@ def test_a_checkpoint_from_before_a_new_hyperparameter_resumes_it_from_the_confi
     assert len(arrays) < len(np.load(older).files)
     np.savez(older, **arrays)
     assert_resumes_to(uninterrupted, out)
+
+
+def test_a_resume_under_another_sparse_layer1_is_refused_and_an_unstored_one_means_on(uninterrupted, tmp_path):
+    out, older = older_copy(uninterrupted, tmp_path)
+    with np.load(older) as data:
+        assert json.loads(data["__meta__"].tobytes())["speed"] == {"sparse_layer1": True}
+    cfg, dense = run_dir_io.read_config(out), Speed(sparse_layer1=False)
+    before = snapshot(out)
+    with pytest.raises(checkpoint.CheckpointError, match="speed.sparse_layer1 is True; resuming with False") as exc:
+        train.run(cfg, out, resume=True, progress=False, speed=dense)
+    assert "\n" not in str(exc.value) and snapshot(out) == before
+    # A run stored with it off resumes only with it off.
+    edit_meta(older, lambda meta: meta["speed"].update(sparse_layer1=False))
+    assert cli.train_main(["--resume", str(out), "--quiet"]) == cli.EXIT_USAGE
+    # Checkpoints written before the setting was stored were all made with it on.
+    edit_meta(older, lambda meta: meta.pop("speed"))
+    with pytest.raises(checkpoint.CheckpointError, match="speed.sparse_layer1"):
+        train.prepare(cfg, out, resume=True, speed=dense)
+    assert_resumes_to(uninterrupted, out)
+
+
+def test_a_resume_reads_its_checkpoint_once_and_builds_one_batch(uninterrupted, tmp_path, monkeypatch):
+    out, _ = older_copy(uninterrupted, tmp_path)
+    calls = {"load": 0, "init_batch": 0}
+
+    def counted(name, real):
+        def wrapper(*args, **kwargs):
+            calls[name] += 1
+            return real(*args, **kwargs)
+
+        return wrapper
+
+    monkeypatch.setattr(checkpoint, "load", counted("load", checkpoint.load))
+    monkeypatch.setattr(batch, "init_batch", counted("init_batch", batch.init_batch))
+    assert_resumes_to(uninterrupted, out)  # validation, then training, of a run with a chunk left
+    assert calls == {"load": 1, "init_batch": 1}
+    # A fresh run from another run's networks reads that run's checkpoint once too.
+    argv = ["--trials", "2", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "100", "--quiet"]
+    calls.update(load=0)
+    assert cli.train_main([*argv, "--init-from", str(uninterrupted), "--out", str(tmp_path / "from")]) == 0
+    assert calls["load"] == 1
+
+
+def test_a_prepared_run_carries_its_own_settings(uninterrupted, tmp_path):
+    prepared = train.prepare(run_dir_io.read_config(uninterrupted), uninterrupted, resume=True)
+    assert prepared.chunk == checkpoint.checkpoint_chunk(checkpoint.list_checkpoints(uninterrupted)[-1])
+    with pytest.raises(TypeError, match="carries its run_dir"):
+        train.run(prepared, tmp_path / "elsewhere")
 
 
 def test_snapshots_are_kept_every_n_chunks(tmp_path):

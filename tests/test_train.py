@@ -20,6 +20,7 @@ from reach_jax import (
     encoding,
     exploration,
     fields,
+    hyper,
     learner,
     network,
     protocol,
@@ -469,6 +470,17 @@ def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
         assert r["noise_final_ratio"] in (0.5, 1) and r["noise_anneal_trials"] == 10
         if r["noise_final_ratio"] == 1:
             assert r["exploration"] == pytest.approx(0.2)
+
+
+def test_metrics_rows_read_the_batchs_hyperparameters_spelled_as_the_config():
+    cfg = tiny(seeds=2, conditions=("none",))
+    group = batch.init_batch(cfg)
+    hypers = group.hypers._replace(noise=jnp.asarray([0.2, 0.35], jnp.float32))
+    rows = train.metrics_rows(jax.device_get(group.states), hypers, batch.learner_table(cfg.train), 1, 0.0, cfg)
+    assert [r["noise"] for r in rows] == [0.2, 0.35]  # the batch's, not the config's 0.2 twice
+    assert rows[1]["exploration"] == float(np.float32(0.35))  # not annealed yet: the batch's bound
+    first = json.dumps({k: rows[0][k] for k in hyper.NAMES})
+    assert first == json.dumps(batch.learner_hypers(cfg)[0])  # 0.2 and 300000, not 0.20000000298 or 300000.0
 
 
 def test_chunk_members_shrink_to_the_unfinished_learners():
