@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections import deque
@@ -68,30 +69,49 @@ class LearnerEta:
 
     Learners of a batch run in lockstep, and in a run's tail the batch shrinks to the unfinished learners
     (`pow2_batch`), where a step takes less time. So the estimate walks the learners' finishing order: with
-    s_1 <= ... <= s_k the steps left of the k unfinished learners (trials left x each one's steps per trial over
-    the last `window` updates), the batch runs s_1 steps at size pow2_batch(k), then s_2 - s_1 at
-    pow2_batch(k - 1), and so on, each step costing `seconds_per_step` at that size.
+    s_1 <= ... <= s_k the steps left of the k unfinished learners, the batch runs s_1 steps at size pow2_batch(k),
+    then s_2 - s_1 at pow2_batch(k - 1), and so on.
+
+    Steps left are trials left x steps per trial, which changes as a learner learns and in its crises. Three
+    measures of it each give an estimate: over the last `window` updates (follows a change), over the last
+    `long_window` (rides out a passing crisis) and over the learner's life (carries the slow fall of trial
+    lengths); the estimate is their geometric mean. A step at batch size n costs a + b ceil(n / devices): one
+    device's share of the learners plus a fixed cost, a = fixed_learners x b until two per-device sizes are
+    measured (`seconds_per_step`). No estimate is given before it says that `min_done` of the run is done.
     """
 
-    def __init__(self, budget: int, window: int = 20, fixed_share: float = 0.65):
+    def __init__(
+        self,
+        budget: int,
+        devices: int = 1,
+        window: int = 20,
+        long_window: int = 400,
+        fixed_learners: float = 3.5,
+        min_done: float = 0.05,
+    ):
         """Args:
         budget: trials per learner.
-        window: updates over which a learner's steps per trial are measured.
-        fixed_share: the share of a step's time that does not shrink with the batch, assumed until two batch
-          sizes are measured: about 0.7 here (benchmarks/results/throughput.json: 8.2 us a step for 1 learner,
-          11.4 us for 8 on 2 devices), about 1 on a GPU. tests/test_progress.py holds the estimate within 25%
-          from half the run for true shares of 0.5 to 1.
+        devices: devices the learners are spread over.
+        window, long_window: updates over which the two recent measures of steps per trial are taken.
+        fixed_learners: the step's fixed cost in learners' worth of per-device cost, assumed until two sizes are
+          measured: 3.5 on this CPU (benchmarks/results/throughput-20261130T105428Z.json: 12.7, 32.8 and 114 us a
+          step for 8, 32 and 128 learners on 2 devices); far more on a GPU, where the fixed cost dominates.
+        min_done: the share of the run, by its own estimate, before which none is given.
         """
         self.budget = budget
-        self.fixed_share = fixed_share
-        self.history: deque = deque(maxlen=window + 1)  # (time [s], trials (L,), steps (L,))
+        self.devices = max(int(devices), 1)
+        self.fixed_learners = fixed_learners
+        self.min_done = min_done
+        self.history: deque = deque(maxlen=long_window + 1)  # (time [s], trials (L,), steps (L,))
+        self.window = window
+        self.start: float | None = None
         self.step_time: dict[int, float] = {}  # batch size -> seconds per step in its newest chunk
 
     def update(self, trials, steps, now: float, batch_size: int) -> float | None:
         """Record the learners' trials and steps after a chunk that ran `batch_size` learners, at time `now` [s].
 
-        Returns the estimate [s], 0 when every learner is done, or None before two points or while an unfinished
-        learner has ended no trial in the window.
+        Returns the estimate [s], 0 when every learner is done, or None before two points, while an unfinished
+        learner has ended no trial in the window, or before min_done of the run.
         """
         trials = np.minimum(np.asarray(trials, dtype=np.float64), self.budget)
         steps = np.asarray(steps, dtype=np.float64)
@@ -100,32 +120,45 @@ class LearnerEta:
             took = float(np.max(steps - steps_prev))  # the chunk's length: an unfinished member ran all of it
             if now > t_prev and took > 0:
                 self.step_time[batch_size] = (now - t_prev) / took
+        else:
+            self.start = now
         self.history.append((now, trials, steps))
         left = self.budget - trials
         busy = left > 0
         if not busy.any():
             return 0.0
-        _, first_trials, first_steps = self.history[0]
-        ended = trials - first_trials
-        if not self.step_time or np.any(ended[busy] <= 0):
+        recent = self.history[max(len(self.history) - 1 - self.window, 0)]
+        if not self.step_time or np.any((trials - recent[1])[busy] <= 0):
             return None
-        steps_left = np.sort(left[busy] * (steps - first_steps)[busy] / ended[busy])
+        per_trial = [self._steps_per_trial(trials, steps, point)[busy] for point in (recent, self.history[0])]
+        per_trial.append((steps / np.maximum(trials, 1.0))[busy])
+        estimates = [self._seconds(left[busy] * rate, len(trials)) for rate in per_trial]
+        seconds = float(np.exp(np.mean(np.log(np.maximum(estimates, 1e-9)))))
+        elapsed = now - self.start
+        return seconds if elapsed >= self.min_done * (elapsed + seconds) else None
+
+    @staticmethod
+    def _steps_per_trial(trials, steps, since) -> np.ndarray:
+        _, trials_then, steps_then = since
+        return (steps - steps_then) / np.maximum(trials - trials_then, 1e-9)
+
+    def _seconds(self, steps_left: np.ndarray, n_learners: int) -> float:
         seconds, done = 0.0, 0.0
-        for k, s in zip(range(len(steps_left), 0, -1), steps_left, strict=True):
-            seconds += (s - done) * self.seconds_per_step(pow2_batch(k, len(trials)))
+        for k, s in zip(range(len(steps_left), 0, -1), np.sort(steps_left), strict=True):
+            seconds += (s - done) * self.seconds_per_step(pow2_batch(k, n_learners))
             done = s
         return seconds
 
     def seconds_per_step(self, size: int) -> float:
-        """Time of one step at batch `size` [s]: measured, else a straight line in the size through the measured
-        sizes (through one, with `fixed_share` of it independent of the size)."""
+        """Time of one step at batch `size` [s]: measured, else a + b ceil(size / devices) fitted to the measured
+        sizes (through one, with a = fixed_learners x b)."""
         if size in self.step_time:
             return self.step_time[size]
-        sizes = np.array(sorted(self.step_time), dtype=np.float64)
-        times = np.array([self.step_time[int(n)] for n in sizes])
-        if len(sizes) == 1:
-            slope = (1.0 - self.fixed_share) * times[0] / sizes[0]
+        share = np.array([math.ceil(n / self.devices) for n in self.step_time], dtype=np.float64)
+        times = np.array(list(self.step_time.values()))
+        if len(set(share)) < 2:
+            b = float(np.mean(times / (self.fixed_learners + share)))
+            a = self.fixed_learners * b
         else:
-            slope = max(float(np.polyfit(sizes, times, 1)[0]), 0.0)
-        nearest = int(np.argmin(np.abs(sizes - size)))
-        return max(float(times[nearest] + slope * (size - sizes[nearest])), 0.0)
+            b, a = (max(float(c), 0.0) for c in np.polyfit(share, times, 1))
+        return a + b * math.ceil(size / self.devices)

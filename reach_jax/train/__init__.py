@@ -341,10 +341,10 @@ class CheckpointSink(Sink):
 class ProgressSink(Sink):
     """Draws the progress bar with the time left until the slowest learner is done (`LearnerEta`)."""
 
-    def __init__(self, budget: int, n_learners: int, stream=None):
+    def __init__(self, budget: int, n_learners: int, n_devices: int, stream=None):
         self.budget, self.total = budget, budget * n_learners
         self.bar = Progress(self.total, "trials", stream=stream)
-        self.eta = LearnerEta(budget)
+        self.eta = LearnerEta(budget, devices=min(n_devices, n_learners))
 
     def chunk(self, done: Finished, rows: list[dict]) -> None:
         """Redraw with the trials done and each condition's recent success rate."""
@@ -394,7 +394,8 @@ def run(
     if jax.process_index() == 0:  # one writer when several processes share the run directory
         sinks = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
         if progress:
-            sinks.append(ProgressSink(prep.cfg.train.trials, len(table), stream))
+            n_devices = len(devices if devices is not None else jax.devices())
+            sinks.append(ProgressSink(prep.cfg.train.trials, len(table), n_devices, stream))
     started = time.monotonic()
     for done in chunks(prep, group, devices):
         rows = metrics_rows(done.states, group.hypers, table, done.index, time.monotonic() - started, prep.cfg)
