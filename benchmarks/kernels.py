@@ -19,7 +19,6 @@ import os
 import re
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from reach_jax import chunk as chunk_lib
@@ -96,11 +95,8 @@ def main(argv=None) -> int:
         "jax": jax.__version__,
         "backend": jax.default_backend(),
     }
-    path = args.json or throughput.RESULTS / f"kernels-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps(result, indent=2))
-    print(f"wrote {path}")
+    throughput.write_result(result, "kernels", args.json)
     return 0
 
 

@@ -20,11 +20,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import os
 import statistics
 import sys
-import time
 from pathlib import Path
 
 from reach_jax import distribute
@@ -103,10 +101,7 @@ def main(argv=None) -> int:
         "code": throughput.code_version(),
         "jax": jax.__version__,
     }
-    path = args.json or throughput.RESULTS / f"levers-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {path}")
+    throughput.write_result(result, "levers", args.json)
     return 0
 
 

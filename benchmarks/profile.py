@@ -14,7 +14,6 @@ Writes benchmarks/results/profile-<UTC time>.json unless --json names one.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -139,10 +138,7 @@ def main(argv=None) -> int:
         }
         print(name, result["parts"][name], flush=True)
     result.update(code=throughput.code_version(), jax=jax.__version__, backend=jax.default_backend())
-    path = args.json or throughput.RESULTS / f"profile-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {path}")
+    throughput.write_result(result, "profile", args.json)
     return 0
 
 

@@ -14,7 +14,6 @@ import argparse
 import json
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -91,9 +90,7 @@ def main(argv=None) -> int:
             "metrics_rows_differing": unequal,
         }
     result["code"] = throughput.code_version()
-    path = args.json or throughput.RESULTS / f"table2-run-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=2) + "\n")
+    throughput.write_result(result, "table2-run", args.json)
     print(json.dumps(result, indent=2))
     return 0
 

@@ -49,6 +49,15 @@ DEFAULT_RUN = Path("runs/table2")
 RESULTS = Path(__file__).resolve().parent / "results"  # one JSON per measurement
 
 
+def write_result(result: dict, name: str, path: Path | None = None) -> Path:
+    """Write a benchmark's result as JSON to `path`, else to a new benchmarks/results/<name>-<UTC time>.json."""
+    path = path or RESULTS / f"{name}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {path}")
+    return path
+
+
 def parse(argv=None) -> argparse.Namespace:
     """Command line of the benchmark."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -266,10 +275,7 @@ def main(argv=None) -> int:
         "cores": os.cpu_count(),
         "benchmark_wall_s": time.perf_counter() - started,
     }
-    path = args.json or RESULTS / f"throughput-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}.json"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {path}")
+    write_result(result, "throughput", args.json)
     if args.compare:
         old = json.loads(args.compare.read_text())["learner_steps_per_s"]
         slow = [n for n, v in result["learner_steps_per_s"].items() if n in old and v < REGRESSION_FLOOR * old[n]]
