@@ -208,7 +208,7 @@ def load_batch(
     }
     tree, meta = checkpoint.load(path, template, defaults)
     try:
-        # Through from_dict, so a field added to the config since the checkpoint reads as its default.
+        # Through from_dict, so a stored config of an older version reads as what the run trained with.
         stored = from_dict(meta["config"])
     except (KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: stored config unreadable ({exc})") from None
