@@ -100,7 +100,8 @@ STEP_FIXED, STEP_PER_LEARNER = 6.0e-6, 1.7e-6
 
 
 @pytest.mark.parametrize(
-    "run", ["table2", "heldout", "dev_gradual", "dev_delayed", "dev_value", "screen", "screen2", "screen3"]
+    "run",
+    ["table2", "heldout", "dev_gradual", "dev_delayed", "dev_value", "dev_value_half", "screen", "screen2", "screen3"],
 )
 def test_eta_on_the_trial_lengths_of_committed_runs(run):
     """Replays a committed run's trials and steps on a fake clock with the trainer's tail repacking: the estimate is
