@@ -134,11 +134,11 @@ def next_trial(draws: task.TrialDraws, cur: curriculum.Curriculum, trials: jax.A
     return start_trial(start, target, force), cond, block
 
 
-def reset(draws: task.TrialDraws, params: EnvParams, cfg: Config) -> EnvState:
-    """A learner's environment before its first trial: the initial curriculum and trial 0 of its protocol."""
+def reset(draws: task.TrialDraws, plan: protocol.Plan, cfg: Config) -> EnvState:
+    """A learner's environment before its first trial: the initial curriculum and trial 0 of its protocol `plan`."""
     cur = curriculum.initial(cfg)
     trials = jnp.array(0, jnp.int32)
-    trial, cond, block = next_trial(draws, cur, trials, params.plan, cfg)
+    trial, cond, block = next_trial(draws, cur, trials, plan, cfg)
     return EnvState(trial=trial, cond=cond, block=block, curriculum=cur, trials=trials)
 
 

@@ -64,7 +64,7 @@ def init_learner(key: jax.Array, plan: protocol.Plan, cfg: Config) -> LearnerSta
     """Fresh learner: new weights, first trial at the initial curriculum distance in its plan's first condition."""
     k_param, k_trial, k_run = jax.random.split(key, 3)
     draws = task.draw_trial(k_trial, cfg)
-    state = env.reset(draws, env.EnvParams(plan=plan, drift_neutral_early=jnp.array(False)), cfg)
+    state = env.reset(draws, plan, cfg)
     start = state.trial.arm
     rows = encoding.coded_support(start, start, jnp.zeros(2), cfg)
     return LearnerState(
