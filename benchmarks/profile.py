@@ -41,7 +41,7 @@ def parts(cfg):
     """Name -> one learner's part of a step, (state, u) -> state, to scan and vmap."""
     import jax.numpy as jnp
 
-    from reach_jax import encoding, env, exploration, learner, network, random_stream, rollout
+    from reach_jax import curriculum, encoding, env, exploration, learner, network, random_stream, rollout
 
     # Each part's result feeds the carried state in full, so that the compiler removes none of it.
     def draws(s, u):
@@ -68,7 +68,9 @@ def parts(cfg):
 
     def env_step(s, u, plan, hyper):
         unit, draws_ = random_stream.split_uniforms(u, cfg)
-        carried, fresh = exploration.noise(unit, hyper, s.env.trials, s.env.curriculum.full_at, 0.0, unit)
+        cur = s.env.curriculum
+        shortfall = curriculum.shortfall(cur, cfg)
+        carried, fresh = exploration.noise(unit, hyper, s.env.trials, cur.full_at, 0.0, unit, shortfall)
         params = env.EnvParams(plan=plan, drift_neutral_early=hyper.drift_neutral_early > 0)
         new, _ = env.step(s.env, network.torque(carried, fresh, cfg), draws_, params, cfg)
         return s.replace(env=new)

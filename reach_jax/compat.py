@@ -8,7 +8,11 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3)  # `config.CONFIG_VERSION` is the last
+FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
+
+# Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
+ADDED_CONFIG_FIELDS = {3: {"learner": {"noise_value_gate": 0.0}, "train": {"noise_value_gate_grid": []}}}
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
 # results (`reach_jax.speed.Speed`). Reading drops them, so those runs still load and resume.
@@ -73,10 +77,20 @@ def migrate_config(data: dict, version: int) -> dict:
     keeps the earlier behaviour, and `config.from_dict` fills it so, except `task.drift_neutral_when_full`, which
     came in switched on: a config without it trained under the old staircase, so it reads as False. Version 1 also
     covers the speed fields dropped since (RETIRED_FIELDS) and the `force` section of the time before conditions
-    were data.
+    were data. A complete config of an older version gains the fields of each later one (ADDED_CONFIG_FIELDS).
     """
-    if version != 1:
-        return data
+    if version == 1:
+        data = _migrate_version_1(data)
+    for since, sections in ADDED_CONFIG_FIELDS.items():
+        if FIRST_COMPLETE_CONFIG <= version < since:
+            for name, added in sections.items():
+                section = data.get(name, {})
+                if isinstance(section, dict):
+                    data = {**data, name: {**added, **section}}
+    return data
+
+
+def _migrate_version_1(data: dict) -> dict:
     data = {k: drop_retired(k, v) for k, v in data.items()}
     task = data.get("task", {})
     if isinstance(task, dict) and "drift_neutral_when_full" not in task:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from reach_jax import compat, hyper
 from reach_jax.errors import printable
 
-CONFIG_VERSION = 2  # 2: a stored config holds every field; 1: older layouts (`compat.migrate_config`)
+CONFIG_VERSION = 3  # a stored config holds every field; 3: noise_value_gate (`compat.migrate_config`)
 
 
 @dataclass(frozen=True)
@@ -393,10 +393,10 @@ def from_dict(data: dict) -> Config:
     data = dict(data)
     version = data.pop("version", None)
     if version not in compat.READABLE_CONFIGS:
-        readable = " or ".join(map(str, compat.READABLE_CONFIGS))
-        raise ValueError(f"version: expected {readable}, found {printable(str(version))}")
-    complete = version == CONFIG_VERSION
+        *earlier, last = map(str, compat.READABLE_CONFIGS)
+        raise ValueError(f"version: expected {', '.join(earlier)} or {last}, found {printable(str(version))}")
     data = compat.migrate_config(data, version)
+    complete = version >= compat.FIRST_COMPLETE_CONFIG
     table = {c.name: c for c in PAPER_CONDITIONS}
     sections = {}
     for f in dataclasses.fields(Config):

@@ -25,6 +25,11 @@ def bounds(cfg: Config) -> tuple[float, float]:
     return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
 
 
+def shortfall(cur: Curriculum, cfg: Config) -> jax.Array:
+    """() how far the distance falls short of the whole field, as a fraction of it: 0 at the whole field."""
+    return 1.0 - cur.distance / bounds(cfg)[1]
+
+
 def initial(cfg: Config) -> Curriculum:
     """The staircase before the first trial: the initial distance, full from the start only if that spans the field."""
     distance, full = (jnp.asarray(b) for b in bounds(cfg))

@@ -86,6 +86,14 @@ TABLE = (
         neutral=0.0,
     ),
     Hyperparameter(
+        "noise_value_gate",
+        0.0,
+        "curriculum shortfall from the whole field (fraction of it) at which the value scaling is fully relaxed; "
+        "0 = off (model §5 choice)",
+        high=1.0,
+        neutral=0.0,
+    ),
+    Hyperparameter(
         "noise_corr",
         0.0,
         "step-to-step correlation of rnd, AR(1) with the spread kept; 0 = white (model §5 choice)",

@@ -12,7 +12,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from reach_jax import encoding, env, exploration, learner, network, protocol, random_stream, task, trial_log
+from reach_jax import curriculum, encoding, env, exploration, learner, network, protocol, random_stream, task, trial_log
 from reach_jax.config import Config
 from reach_jax.hyper import Hyper
 from reach_jax.learner_state import AgentState, LearnerState, Stats, without_params
@@ -56,8 +56,9 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
     params, out, loss, u1 = learner.ts_step(
         agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None, hyper.actor_baseline
     )
-    full_at = state.env.curriculum.full_at
-    carried, fresh = exploration.noise(unit, hyper, state.env.trials, full_at, out[0], agent.pending.rnd)
+    cur = state.env.curriculum
+    shortfall = curriculum.shortfall(cur, cfg)
+    carried, fresh = exploration.noise(unit, hyper, state.env.trials, cur.full_at, out[0], agent.pending.rnd, shortfall)
     # The carried part joins the outputs before the torque map, in this order, as the oracle rounds it.
     return params, out, loss, u1, carried + fresh, network.torque(out[1:] + carried, fresh, cfg)
 

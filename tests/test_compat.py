@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from reach_jax import compat
-from reach_jax.config import CONFIG_VERSION, Config, from_dict, from_partial, to_dict, with_defaults
+from reach_jax.config import CONFIG_VERSION, Config, LearnerConfig, from_dict, from_partial, to_dict, with_defaults
 
 
 @pytest.mark.parametrize(
@@ -81,8 +81,19 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1 or 2, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2 or 3, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
+
+
+def test_version_2_gains_the_fields_of_version_3_at_the_values_that_keep_its_runs():
+    stored = {**to_dict(Config(learner=LearnerConfig(noise_value_ratio=0.5))), "version": 2}
+    del stored["learner"]["noise_value_gate"], stored["train"]["noise_value_gate_grid"]
+    cfg = from_dict(stored)
+    assert cfg.learner.noise_value_gate == 0.0 and cfg.train.noise_value_gate_grid == ()
+    assert cfg == Config(learner=LearnerConfig(noise_value_ratio=0.5))
+    del stored["learner"]["noise_corr"]  # version 2 stored every field of its own
+    with pytest.raises(ValueError, match="^learner.noise_corr: missing"):
+        from_dict(stored)
 
 
 def test_a_partial_config_takes_the_current_defaults_for_what_it_leaves_out():

@@ -216,6 +216,12 @@ def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():
     # From the first full field only: the whole bound before it, scaled after it.
     after = h._replace(noise_value_after_full=jnp.asarray(1.0))
     assert float(scale(0.45, -1, after)) == 1.0 and float(scale(0.45, 30, after)) == pytest.approx(0.25)
+    # Gated by the curriculum: relaxed linearly with its shortfall from the whole field, fully at the gate.
+    gated = jax.jit(lambda p, s, g: exploration.value_scale(h._replace(noise_value_gate=g), p, 30, s))
+    for short, want in ((0.0, 0.25), (0.05, 0.625), (0.1, 1.0), (0.6, 1.0)):
+        assert float(gated(0.45, short, 0.1)) == pytest.approx(want, abs=1e-6), short
+    assert float(gated(0.2, 0.05, 0.1)) == pytest.approx(0.625 + 0.375 * 0.5, abs=1e-6)  # times the value's ramp
+    assert float(gated(0.45, 0.6, 0.0)) == pytest.approx(0.25)  # gate 0: off, whatever the shortfall
     quiet = jax.jit(lambda t, k: exploration.quiet(h._replace(quiet_every=jnp.asarray(k)), t))
     assert [bool(quiet(t, 3.0)) for t in range(7)] == [False, False, True, False, False, True, False]
     assert not any(bool(quiet(t, 0.0)) for t in range(7))

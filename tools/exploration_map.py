@@ -40,6 +40,8 @@ def describe(h: dict) -> str:
         text += f"; ×{r:g} near the goal (p {h.get('noise_value_lo', 0.0):g}→{h.get('noise_value_hi', 0.3):g})"
         if h.get("noise_value_after_full"):
             text += " once full"
+        if h.get("noise_value_gate"):
+            text += f", whole below {1 - h['noise_value_gate']:.0%} of the field"
     if "noise_corr" in h:
         text += f"; AR ρ {h['noise_corr']:g}"
     if "quiet_every" in h:
