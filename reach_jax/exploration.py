@@ -5,7 +5,7 @@ per-learner hyperparameter (`hyper.TABLE`). The optional forms below are off at 
 the noise is b (2u - 1) exactly as before they existed:
 - an anneal of b once the curriculum has reached the whole field (`schedule`);
 - b scaled by the critic's value, smallest where it expects the goal, from the start or from the first full
-  field, and relaxed while the curriculum falls short of the whole field (`value_scale`);
+  field, relaxed while the curriculum falls short of the whole field or once a trial runs long (`value_scale`);
 - trials without noise, the correlated share included (`quiet`);
 - AR(1) noise correlated from step to step, with the stationary spread of the white noise (`noise`).
 """
@@ -34,24 +34,27 @@ def schedule(h: Hyper, trials: jax.Array, full_at: jax.Array) -> jax.Array:
     return h.noise * (1.0 + (h.noise_final_ratio - 1.0) * frac)
 
 
-def value_scale(h: Hyper, p: jax.Array, full_at: jax.Array, shortfall: jax.Array = 0.0) -> jax.Array:
+def value_scale(h: Hyper, p: jax.Array, full_at: jax.Array, shortfall: jax.Array = 0.0, t: jax.Array = 0) -> jax.Array:
     """() factor in [noise_value_ratio, 1] on the bound at a state whose critic value is p.
 
     1 where p <= noise_value_lo (far from the goal, or failing), noise_value_ratio where p >= noise_value_hi
     (the critic expects the goal soon), linear between; 1 everywhere before the curriculum first reached the
     whole field (full_at < 0) when noise_value_after_full is on. With noise_value_gate g > 0 the smallest
     factor rises linearly from noise_value_ratio at the whole field to 1 at a shortfall of g: a learner whose
-    curriculum falls back explores with the whole bound again.
+    curriculum falls back explores with the whole bound again. With noise_value_steps n > 0 the factor is 1 from
+    step n of a trial on: a hand held off the target, as by a constant force, is shaken loose.
 
     Args:
       h: the learner's hyperparameters.
       p: () the critic's value of the step's input.
       full_at: () trial count when the curriculum first reached the whole field; negative before.
       shortfall: () 1 - curriculum distance / the whole field's, in [0, 1).
+      t: () steps taken in the trial before this one.
     """
     ratio = jnp.where((h.noise_value_after_full > 0) & (full_at < 0), 1.0, h.noise_value_ratio)
     gated = h.noise_value_gate > 0
     relax = jnp.where(gated, jnp.clip(shortfall / jnp.where(gated, h.noise_value_gate, 1.0), 0.0, 1.0), 0.0)
+    relax = jnp.where((h.noise_value_steps > 0) & (t >= h.noise_value_steps), 1.0, relax)
     ratio = ratio + (1.0 - ratio) * relax
     far = jnp.clip((h.noise_value_hi - p) / (h.noise_value_hi - h.noise_value_lo), 0.0, 1.0)
     return ratio + (1.0 - ratio) * far
@@ -71,6 +74,7 @@ def noise(
     p: jax.Array,
     prev: jax.Array,
     shortfall: jax.Array = 0.0,
+    t: jax.Array = 0,
 ):
     """(2,) rnd of this step, as (carried, fresh): rnd = carried + fresh.
 
@@ -85,7 +89,8 @@ def noise(
       p: () the critic's value of this step's input.
       prev: (2,) the previous step's rnd (0 at the start of training).
       shortfall: () 1 - curriculum distance / the whole field's (`value_scale`).
+      t: () steps taken in the trial before this one.
     """
     silent = quiet(h, trials)
-    b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * value_scale(h, p, full_at, shortfall))
+    b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * value_scale(h, p, full_at, shortfall, t))
     return jnp.where(silent, 0.0, h.noise_corr * prev), jnp.sqrt(1.0 - h.noise_corr**2) * b * unit

@@ -94,6 +94,13 @@ TABLE = (
         neutral=0.0,
     ),
     Hyperparameter(
+        "noise_value_steps",
+        0,
+        "steps into a trial from which the value scaling is off, the whole bound back; 0 = never (model §5 choice)",
+        integer=True,
+        neutral=0,
+    ),
+    Hyperparameter(
         "noise_corr",
         0.0,
         "step-to-step correlation of rnd, AR(1) with the spread kept; 0 = white (model §5 choice)",

@@ -58,7 +58,10 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
     )
     cur = state.env.curriculum
     shortfall = curriculum.shortfall(cur, cfg)
-    carried, fresh = exploration.noise(unit, hyper, state.env.trials, cur.full_at, out[0], agent.pending.rnd, shortfall)
+    t = state.env.trial.t
+    carried, fresh = exploration.noise(
+        unit, hyper, state.env.trials, cur.full_at, out[0], agent.pending.rnd, shortfall, t
+    )
     # The carried part joins the outputs before the torque map, in this order, as the oracle rounds it.
     return params, out, loss, u1, carried + fresh, network.torque(out[1:] + carried, fresh, cfg)
 

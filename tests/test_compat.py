@@ -87,9 +87,11 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
 
 def test_version_2_gains_the_fields_of_version_3_at_the_values_that_keep_its_runs():
     stored = {**to_dict(Config(learner=LearnerConfig(noise_value_ratio=0.5))), "version": 2}
-    del stored["learner"]["noise_value_gate"], stored["train"]["noise_value_gate_grid"]
+    for name in ("noise_value_gate", "noise_value_steps"):
+        del stored["learner"][name], stored["train"][f"{name}_grid"]
     cfg = from_dict(stored)
     assert cfg.learner.noise_value_gate == 0.0 and cfg.train.noise_value_gate_grid == ()
+    assert cfg.learner.noise_value_steps == 0 and cfg.train.noise_value_steps_grid == ()
     assert cfg == Config(learner=LearnerConfig(noise_value_ratio=0.5))
     del stored["learner"]["noise_corr"]  # version 2 stored every field of its own
     with pytest.raises(ValueError, match="^learner.noise_corr: missing"):

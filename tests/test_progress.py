@@ -99,15 +99,22 @@ def committed_profile(run: str):
 STEP_FIXED, STEP_PER_LEARNER = 6.0e-6, 1.7e-6
 
 
-@pytest.mark.parametrize(
-    "run",
-    ["table2", "heldout", "dev_gradual", "dev_delayed", "dev_value", "dev_value_half", "screen", "screen2", "screen3"],
+COMMITTED_RUNS = (
+    "table2",
+    "heldout",
+    "dev_gradual",
+    "dev_delayed",
+    "dev_value",
+    "dev_value_half",
+    "screen",
+    "screen2",
+    "screen3",
 )
-def test_eta_on_the_trial_lengths_of_committed_runs(run):
-    """Replays a committed run's trials and steps on a fake clock with the trainer's tail repacking: the estimate is
-    within half of the truth from 5% of the run (the issue-21 target), and within 40% from half of it. The target
-    there is a quarter, which it misses (35% in runs/heldout: the slowest learner's trials shorten later than any
-    of the three measures of its steps per trial foresees). Errors within one chunk's time are not counted."""
+
+
+def worst_eta_errors(run: str) -> dict[float, float]:
+    """Replays a committed run's trials and steps on a fake clock with the trainer's tail repacking: the largest
+    relative error of the estimate from 5% and from half of the run. Errors within one chunk's time are not counted."""
     trials, steps, budget, chunk_steps = committed_profile(run)
     n = trials.shape[1]
     sizes = [pow2_batch(int(np.sum(before < budget)), n) for before in [np.zeros(n), *trials[:-1]]]
@@ -124,7 +131,24 @@ def test_eta_on_the_trial_lengths_of_committed_runs(run):
             if now >= start * clock[-1]:
                 worst[start] = max(worst[start], abs(got / left - 1))
     assert got == 0.0
+    return worst
+
+
+@pytest.mark.parametrize("run", COMMITTED_RUNS)
+def test_eta_on_the_trial_lengths_of_committed_runs(run):
+    """Within half of the truth from 5% of the run (the issue-21 target), and within 40% from half of it: a guard
+    against getting worse than today, not the target (next test)."""
+    worst = worst_eta_errors(run)
     assert worst[0.05] <= 0.5 and worst[0.5] <= 0.4, worst
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 21's target of a quarter from half the run is not met: 35% in runs/heldout, whose slowest "
+    "learner's trials shorten later than any of the estimator's three measures of its steps per trial foresees",
+)
+def test_eta_is_within_a_quarter_of_the_truth_from_half_of_every_committed_run():
+    assert max(worst_eta_errors(run)[0.5] for run in COMMITTED_RUNS) <= 0.25
 
 
 def test_bar_prints_the_given_eta():

@@ -222,6 +222,10 @@ def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():
         assert float(gated(0.45, short, 0.1)) == pytest.approx(want, abs=1e-6), short
     assert float(gated(0.2, 0.05, 0.1)) == pytest.approx(0.625 + 0.375 * 0.5, abs=1e-6)  # times the value's ramp
     assert float(gated(0.45, 0.6, 0.0)) == pytest.approx(0.25)  # gate 0: off, whatever the shortfall
+    # Off from step n of a trial on: the whole bound once a trial runs long.
+    late = jax.jit(lambda t, n: exploration.value_scale(h._replace(noise_value_steps=n), 0.45, 30, 0.0, t))
+    assert [float(late(t, 40.0)) for t in (0, 39, 40, 200)] == pytest.approx([0.25, 0.25, 1.0, 1.0])
+    assert float(late(200, 0.0)) == pytest.approx(0.25)  # n = 0: never
     quiet = jax.jit(lambda t, k: exploration.quiet(h._replace(quiet_every=jnp.asarray(k)), t))
     assert [bool(quiet(t, 3.0)) for t in range(7)] == [False, False, True, False, False, True, False]
     assert not any(bool(quiet(t, 0.0)) for t in range(7))

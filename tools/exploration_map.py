@@ -42,6 +42,8 @@ def describe(h: dict) -> str:
             text += " once full"
         if h.get("noise_value_gate"):
             text += f", whole below {1 - h['noise_value_gate']:.0%} of the field"
+        if h.get("noise_value_steps"):
+            text += f", whole from step {h['noise_value_steps']:g} of a trial"
     if "noise_corr" in h:
         text += f"; AR ρ {h['noise_corr']:g}"
     if "quiet_every" in h:

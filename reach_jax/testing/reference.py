@@ -481,20 +481,22 @@ def update_n_max(n_max: float, n_steps: int, lam: float) -> float:
 
 
 def exploration_noise(
-    unit, bound: float, p: float, prev, trials: int, was_full: bool, shortfall: float, h: dict
+    unit, bound: float, p: float, prev, trials: int, was_full: bool, shortfall: float, t: int, h: dict
 ) -> np.ndarray:
     """rnd (2,) of one step (model §5): the bound scaled by the critic's value, none on quiet trials, AR(1).
 
     Args: unit (2,) draws in [-1, 1), bound () the schedule's bound, p () the critic's value of the step's input,
       prev (2,) the previous step's rnd, trials () trials ended before this one, was_full () the curriculum has
-      reached the whole field, shortfall () 1 - curriculum distance / the whole field's, h the learner's
-      hyperparameters.
+      reached the whole field, shortfall () 1 - curriculum distance / the whole field's, t () steps taken in the
+      trial, h the learner's hyperparameters.
     """
     far = min(1.0, max(0.0, (h["noise_value_hi"] - p) / (h["noise_value_hi"] - h["noise_value_lo"])))
     ratio = 1.0 if h["noise_value_after_full"] > 0 and not was_full else h["noise_value_ratio"]
     gate = h["noise_value_gate"]
     if gate > 0:  # a curriculum short of the whole field relaxes the scaling, fully at a shortfall of `gate`
         ratio += (1.0 - ratio) * min(1.0, max(0.0, shortfall / gate))
+    if 0 < h["noise_value_steps"] <= t:  # a trial that runs long: the whole bound
+        ratio = 1.0
     b = bound * (ratio + (1.0 - ratio) * far)
     every = h["quiet_every"]
     if every > 0 and (trials + 1) % every == 0:
@@ -764,7 +766,7 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     lr = h["lr"] if lrn.pending_learning else 0.0
     layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg, h["actor_baseline"])
     shortfall = 1.0 - lrn.distance / curriculum_bounds(cfg)[1]
-    rnd = exploration_noise(unit, bound, out[0], lrn.pending.rnd, lrn.trials, lrn.was_full, shortfall, h)
+    rnd = exploration_noise(unit, bound, out[0], lrn.pending.rnd, lrn.trials, lrn.was_full, shortfall, lrn.t, h)
     tau = torque(out[1:], rnd, cfg)
     moved = arm_step(lrn.arm, tau, cond.field, lrn.force, cfg.arm)
     t = lrn.t + 1
