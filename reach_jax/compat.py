@@ -8,15 +8,13 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
 ADDED_CONFIG_FIELDS = {
-    3: {
-        "learner": {"noise_value_gate": 0.0, "noise_value_steps": 0},
-        "train": {"noise_value_gate_grid": [], "noise_value_steps_grid": []},
-    }
+    3: {"learner": {"noise_value_gate": 0.0}, "train": {"noise_value_gate_grid": []}},
+    4: {"learner": {"noise_value_steps": 0}, "train": {"noise_value_steps_grid": []}},
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
