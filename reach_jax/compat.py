@@ -8,13 +8,14 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
 ADDED_CONFIG_FIELDS = {
     3: {"learner": {"noise_value_gate": 0.0}, "train": {"noise_value_gate_grid": []}},
     4: {"learner": {"noise_value_steps": 0}, "train": {"noise_value_steps_grid": []}},
+    5: {"learner": {"actor_gain_power": 0.0}, "train": {"actor_gain_power_grid": []}},
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
@@ -27,9 +28,10 @@ _V2_MOVED += (("env.curriculum.", "curriculum."), ("env.trials", "counters.trial
 # Format-2 files of the first layout stored the state flat, without the groups' names, and the block by its parts.
 _V2_GROUPS = ("agent", "env", "curriculum", "counters")
 _V2_FLAT_RENAMED = {"block.index": "block", "block.learning": "learning", "block.catch": "catch"}
-# State fields that format-2 files of the first layout lack: a fresh batch fills them (the run's own condition,
-# block 0, learning on), which is what those runs, made before protocols, trained with.
-ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "env.block")
+# State fields that older checkpoints lack: a fresh batch fills them with what those runs trained with. Format-2
+# files of the first layout lack the run's own condition, block 0 and learning on (made before protocols); every
+# file before the actor's gain lacks its value 1 (`exploration.actor_gain`).
+ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "env.block", "agent.pending.gain")
 
 # The result-changing speed settings (`speed.RESULT_FIELDS`) of checkpoints written before they were stored.
 SPEED_BEFORE_STORED = {"sparse_layer1": True}

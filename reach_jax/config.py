@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from reach_jax import compat, hyper
 from reach_jax.errors import printable
 
-CONFIG_VERSION = 4  # a stored config holds every field; 3: noise_value_gate, 4: noise_value_steps (`compat`)
+CONFIG_VERSION = 5  # a stored config holds every field; versions 3-5 each added a field (`compat`)
 
 
 @dataclass(frozen=True)

@@ -116,6 +116,14 @@ TABLE = (
         neutral=0.0,
     ),
     Hyperparameter(
+        "actor_gain_power",
+        0.0,
+        "the actor's signal divided by the value scaling's factor to this power; 2 keeps eq. 2's expected step "
+        "(departs from eq. 2, model §5)",
+        high=2.0,
+        neutral=0.0,
+    ),
+    Hyperparameter(
         "drift_neutral_early",
         0.0,
         "1: a drift-aided success leaves the curriculum unchanged before the first full field too (model §5 choice)",

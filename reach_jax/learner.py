@@ -33,6 +33,7 @@ class Pending(NamedTuple):
     reward: jax.Array  # () reinforcement that ended the trial, 0 otherwise
     u1: jax.Array | None = None  # (hidden,) layer-1 pre-activation of x under the current weights; None: recompute
     rows: jax.Array | None = None  # (20,) int32 coded rows of x that may be non-zero; None: use every row
+    gain: jax.Array | float = 1.0  # () factor on the actor's signal for this step (`exploration.actor_gain`)
 
 
 def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None = None) -> Pending:
@@ -52,6 +53,7 @@ def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None
         reward=jnp.array(0.0),
         u1=None if n_hidden is None else jnp.zeros(n_hidden),
         rows=rows,
+        gain=jnp.array(1.0),
     )
 
 
@@ -76,7 +78,7 @@ def ts_targets(
     step_cost = cfg.p_range / n_max
     critic = p_next - step_cost
     critic = jnp.where(pending.terminal, critic, jnp.maximum(critic, cfg.critic_floor))
-    actor = pending.out[1:] + pending.rnd * (p_next - pending.out[0] - baseline * step_cost)
+    actor = pending.out[1:] + pending.rnd * pending.gain * (p_next - pending.out[0] - baseline * step_cost)
     return jnp.concatenate([critic[None], actor])
 
 

@@ -37,7 +37,7 @@ class StepInfo(NamedTuple):
 
 
 def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, learns, cfg: Config, speed: Speed):
-    """TS update on the pending step, then the torques of this one: (params, out, loss, u1, rnd, tau).
+    """TS update on the pending step, then the torques of this one: (params, out, loss, u1, rnd, gain, tau).
 
     Args:
       state: the learner.
@@ -62,8 +62,9 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
     carried, fresh = exploration.noise(
         unit, hyper, state.env.trials, cur.full_at, out[0], agent.pending.rnd, shortfall, t
     )
+    gain = exploration.actor_gain(hyper, exploration.value_scale(hyper, out[0], cur.full_at, shortfall, t))
     # The carried part joins the outputs before the torque map, in this order, as the oracle rounds it.
-    return params, out, loss, u1, carried + fresh, network.torque(out[1:] + carried, fresh, cfg)
+    return params, out, loss, u1, carried + fresh, gain, network.torque(out[1:] + carried, fresh, cfg)
 
 
 def learner_step(
@@ -91,14 +92,13 @@ def learner_step(
     x = env.observe(state.env, cfg)
     rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)  # carried in the pending step
     learns = agent.pending_learning if active is None else active & agent.pending_learning
-    params, out, loss, u1, rnd, tau = act(state, x, rows, unit, hyper, learns, cfg, speed)
+    params, out, loss, u1, rnd, gain, tau = act(state, x, rows, unit, hyper, learns, cfg, speed)
     params_env = env.EnvParams(plan=plan, drift_neutral_early=hyper.drift_neutral_early > 0)
     new_env, outcome = env.step(state.env, tau, draws, params_env, cfg)
     goal, out_of_range, done = outcome.goal, outcome.out_of_range, env.ended(outcome)
     reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)
-    pending = learner.Pending(
-        x=x, out=out, rnd=rnd, valid=~outcome.cap, terminal=goal | out_of_range, reward=reward, u1=u1, rows=rows
-    )
+    terminal = goal | out_of_range
+    pending = learner.Pending(x, out, rnd, ~outcome.cap, terminal, reward, u1=u1, rows=rows, gain=gain)
     n_max = jnp.where(goal, learner.update_n_max(agent.n_max, outcome.t, hyper.lam), agent.n_max)
     trace, record = trace_step(state, new_env, outcome, cfg)
     new = state.replace(

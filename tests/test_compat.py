@@ -40,6 +40,7 @@ def test_fields_that_the_first_layout_lacks_are_the_ones_a_fresh_batch_fills():
     assert compat.is_added_state_field("['states'].env.cond.field.viscous")
     assert compat.is_added_state_field("['states'].env.block.index")
     assert compat.is_added_state_field("['states'].agent.pending_learning")
+    assert compat.is_added_state_field("['states'].agent.pending.gain")
     assert not compat.is_added_state_field("['states'].env.trial.arm")
     assert not compat.is_added_state_field("['states'].agent.params['params']['Dense_0']['bias']")
 
@@ -81,20 +82,22 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3 or 4, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4 or 5, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
 
 
 def test_versions_2_and_3_gain_the_fields_added_since_at_the_values_that_keep_their_runs():
     stored = {**to_dict(Config(learner=LearnerConfig(noise_value_ratio=0.5))), "version": 2}
-    for name in ("noise_value_gate", "noise_value_steps"):
+    for name in ("noise_value_gate", "noise_value_steps", "actor_gain_power"):
         del stored["learner"][name], stored["train"][f"{name}_grid"]
     cfg = from_dict(stored)
     assert cfg.learner.noise_value_gate == 0.0 and cfg.train.noise_value_gate_grid == ()
     assert cfg.learner.noise_value_steps == 0 and cfg.train.noise_value_steps_grid == ()
+    assert cfg.learner.actor_gain_power == 0.0 and cfg.train.actor_gain_power_grid == ()
     assert cfg == Config(learner=LearnerConfig(noise_value_ratio=0.5))
     stored = {**to_dict(Config(learner=LearnerConfig(noise_value_gate=0.1))), "version": 3}
-    del stored["learner"]["noise_value_steps"], stored["train"]["noise_value_steps_grid"]
+    for name in ("noise_value_steps", "actor_gain_power"):
+        del stored["learner"][name], stored["train"][f"{name}_grid"]
     assert from_dict(stored) == Config(learner=LearnerConfig(noise_value_gate=0.1))
     del stored["learner"]["noise_corr"]  # version 3 stored every field of its own
     with pytest.raises(ValueError, match="^learner.noise_corr: missing"):

@@ -542,10 +542,10 @@ ROLLOUT_SEEDS = (2, 3)
 
 
 # Every exploration form on at once (model §5): the bound scaled by the critic's value and gated by the
-# curriculum, AR(1) noise, quiet trials and the actor's baseline. The value range covers the critic's outputs of
-# these young networks (about -0.1 to 0.1), so the scaling acts; the gate's width exceeds the curriculum's
-# shortfall of about 0.68 here, so the gate relaxes it only in part, and wholly from step 10 of a trial on;
-# quiet_every 2 makes every other trial noise-free.
+# curriculum, AR(1) noise, quiet trials, the actor's baseline and its gain. The value range covers the critic's
+# outputs of these young networks (about -0.1 to 0.1), so the scaling acts; the gate's width exceeds the
+# curriculum's shortfall of about 0.68 here, so the gate relaxes it only in part, and wholly from step 10 of a
+# trial on; quiet_every 2 makes every other trial noise-free.
 EXPLORATION_FORMS = {
     "noise_value_ratio": 0.25,
     "noise_value_hi": 0.05,
@@ -554,6 +554,7 @@ EXPLORATION_FORMS = {
     "noise_value_steps": 10,
     "noise_corr": 0.8,
     "actor_baseline": 1.0,
+    "actor_gain_power": 2.0,
     "quiet_every": 2,
     "drift_neutral_early": 1.0,
 }

@@ -226,6 +226,10 @@ def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():
     late = jax.jit(lambda t, n: exploration.value_scale(h._replace(noise_value_steps=n), 0.45, 30, 0.0, t))
     assert [float(late(t, 40.0)) for t in (0, 39, 40, 200)] == pytest.approx([0.25, 0.25, 1.0, 1.0])
     assert float(late(200, 0.0)) == pytest.approx(0.25)  # n = 0: never
+    # The actor's gain undoes the factor to its power; 1 at power 0 and where the factor is 0.
+    gain = jax.jit(lambda s, k: exploration.actor_gain(h._replace(actor_gain_power=k), s))
+    assert [float(gain(0.25, k)) for k in (0.0, 1.0, 2.0)] == pytest.approx([1.0, 4.0, 16.0])
+    assert float(gain(1.0, 2.0)) == 1.0 and float(gain(0.0, 2.0)) == 1.0
     quiet = jax.jit(lambda t, k: exploration.quiet(h._replace(quiet_every=jnp.asarray(k)), t))
     assert [bool(quiet(t, 3.0)) for t in range(7)] == [False, False, True, False, False, True, False]
     assert not any(bool(quiet(t, 0.0)) for t in range(7))

@@ -451,6 +451,7 @@ class Pending:
     valid: bool  # False: no update (first step of a run, or after a capped trial)
     terminal: bool  # the transition ended its trial at the goal or a joint limit
     reward: float  # reinforcement that ended the trial, 0 otherwise
+    gain: float = 1.0  # factor on the actor's signal (the value scaling's factor to -actor_gain_power)
 
 
 def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig, baseline: float = 0.0) -> np.ndarray:
@@ -465,7 +466,7 @@ def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig,
         critic = max(critic, cfg.critic_floor)
     p_prev = pending.out[0]
     signal = p_next - p_prev - baseline * cfg.p_range / n_max  # dp of eq. 2, less the baseline
-    actor = [pending.out[1 + j] + pending.rnd[j] * signal for j in range(2)]  # eq. 2
+    actor = [pending.out[1 + j] + pending.rnd[j] * pending.gain * signal for j in range(2)]  # eq. 2
     return np.array([critic, actor[0], actor[1]])
 
 
@@ -480,15 +481,12 @@ def update_n_max(n_max: float, n_steps: int, lam: float) -> float:
     return lam * n_max
 
 
-def exploration_noise(
-    unit, bound: float, p: float, prev, trials: int, was_full: bool, shortfall: float, t: int, h: dict
-) -> np.ndarray:
-    """rnd (2,) of one step (model §5): the bound scaled by the critic's value, none on quiet trials, AR(1).
+def value_scale(p: float, was_full: bool, shortfall: float, t: int, h: dict) -> float:
+    """() factor on the bound at a state whose critic value is p (model §5): smallest where the goal is expected.
 
-    Args: unit (2,) draws in [-1, 1), bound () the schedule's bound, p () the critic's value of the step's input,
-      prev (2,) the previous step's rnd, trials () trials ended before this one, was_full () the curriculum has
-      reached the whole field, shortfall () 1 - curriculum distance / the whole field's, t () steps taken in the
-      trial, h the learner's hyperparameters.
+    Args: p () the critic's value of the step's input, was_full () the curriculum has reached the whole field,
+      shortfall () 1 - curriculum distance / the whole field's, t () steps taken in the trial, h the learner's
+      hyperparameters.
     """
     far = min(1.0, max(0.0, (h["noise_value_hi"] - p) / (h["noise_value_hi"] - h["noise_value_lo"])))
     ratio = 1.0 if h["noise_value_after_full"] > 0 and not was_full else h["noise_value_ratio"]
@@ -497,7 +495,22 @@ def exploration_noise(
         ratio += (1.0 - ratio) * min(1.0, max(0.0, shortfall / gate))
     if 0 < h["noise_value_steps"] <= t:  # a trial that runs long: the whole bound
         ratio = 1.0
-    b = bound * (ratio + (1.0 - ratio) * far)
+    return ratio + (1.0 - ratio) * far
+
+
+def actor_gain(scale: float, h: dict) -> float:
+    """() factor on the actor's signal of a step explored at value-scale factor `scale`: scale^-actor_gain_power."""
+    power = h["actor_gain_power"]
+    return scale**-power if power > 0 and scale > 0 else 1.0
+
+
+def exploration_noise(unit, bound: float, scale: float, prev, trials: int, h: dict) -> np.ndarray:
+    """rnd (2,) of one step (model §5): the bound times the value scaling's factor, none on quiet trials, AR(1).
+
+    Args: unit (2,) draws in [-1, 1), bound () the schedule's bound, scale () `value_scale`'s factor, prev (2,)
+      the previous step's rnd, trials () trials ended before this one, h the learner's hyperparameters.
+    """
+    b = bound * scale
     every = h["quiet_every"]
     if every > 0 and (trials + 1) % every == 0:
         return np.zeros(2)  # a quiet trial: no noise at all
@@ -740,6 +753,7 @@ def learner_from_jax(state, cond: Condition) -> Learner:
             valid=bool(pend.valid),
             terminal=bool(pend.terminal),
             reward=float(pend.reward),
+            gain=float(pend.gain),
         ),
         t=int(trial.t),
         drifted=bool(trial.drifted),
@@ -765,8 +779,8 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     x = observe(lrn.arm, lrn.prev_arm, lrn.prev_tau, lrn.target, cond.input_mask, cfg)
     lr = h["lr"] if lrn.pending_learning else 0.0
     layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg, h["actor_baseline"])
-    shortfall = 1.0 - lrn.distance / curriculum_bounds(cfg)[1]
-    rnd = exploration_noise(unit, bound, out[0], lrn.pending.rnd, lrn.trials, lrn.was_full, shortfall, lrn.t, h)
+    scale = value_scale(out[0], lrn.was_full, 1.0 - lrn.distance / curriculum_bounds(cfg)[1], lrn.t, h)
+    rnd = exploration_noise(unit, bound, scale, lrn.pending.rnd, lrn.trials, h)
     tau = torque(out[1:], rnd, cfg)
     moved = arm_step(lrn.arm, tau, cond.field, lrn.force, cfg.arm)
     t = lrn.t + 1
@@ -778,7 +792,8 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     done = goal or out_of_range or cap
     lc = cfg.learner
     reward = lc.reward_goal if goal else (lc.reward_out if out_of_range else 0.0)
-    pending = Pending(x=x, out=out, rnd=rnd, valid=not cap, terminal=goal or out_of_range, reward=reward)
+    terminal = goal or out_of_range
+    pending = Pending(x, out, rnd, valid=not cap, terminal=terminal, reward=reward, gain=actor_gain(scale, h))
 
     new = replace(lrn, layers=layers, pending=pending, steps=lrn.steps + 1, pending_learning=lrn.learning)
     if goal:
