@@ -52,6 +52,8 @@ def describe(h: dict) -> str:
         text += "; drift neutral from the start"
     if "actor_baseline" in h:
         text += f"; actor baseline {h['actor_baseline']:g}"
+    if "actor_gain_power" in h:
+        text += f"; actor gain ×s^-{h['actor_gain_power']:g}"
     return text
 
 
