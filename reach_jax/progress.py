@@ -77,7 +77,9 @@ class LearnerEta:
     `long_window` (rides out a passing crisis) and over the learner's life (carries the slow fall of trial
     lengths); the estimate is their geometric mean. A step at batch size n costs a + b ceil(n / devices): one
     device's share of the learners plus a fixed cost, a = fixed_learners x b until two per-device sizes are
-    measured (`seconds_per_step`). No estimate is given before it says that `min_done` of the run is done.
+    measured (`seconds_per_step`); a measured size costs the median of its last `recent_chunks` chunks, since the
+    chunk during which the next batch size compiles takes several times as long as the rest. No estimate is given
+    before it says that `min_done` of the run is done.
     """
 
     def __init__(
@@ -88,6 +90,7 @@ class LearnerEta:
         long_window: int = 400,
         fixed_learners: float = 3.5,
         min_done: float = 0.05,
+        recent_chunks: int = 5,
     ):
         """Args:
         budget: trials per learner.
@@ -97,6 +100,7 @@ class LearnerEta:
           measured: 3.5 on this CPU (benchmarks/results/throughput-20261130T105428Z.json: 12.7, 32.8 and 114 us a
           step for 8, 32 and 128 learners on 2 devices); far more on a GPU, where the fixed cost dominates.
         min_done: the share of the run, by its own estimate, before which none is given.
+        recent_chunks: chunks of one batch size whose median step time prices it.
         """
         self.budget = budget
         self.devices = max(int(devices), 1)
@@ -105,7 +109,8 @@ class LearnerEta:
         self.history: deque = deque(maxlen=long_window + 1)  # (time [s], trials (L,), steps (L,))
         self.window = window
         self.start: float | None = None
-        self.step_time: dict[int, float] = {}  # batch size -> seconds per step in its newest chunk
+        self.recent_chunks = recent_chunks
+        self.step_times: dict[int, deque] = {}  # batch size -> seconds per step in its newest chunks
 
     def update(self, trials, steps, now: float, batch_size: int) -> float | None:
         """Record the learners' trials and steps after a chunk that ran `batch_size` learners, at time `now` [s].
@@ -119,7 +124,8 @@ class LearnerEta:
             t_prev, _, steps_prev = self.history[-1]
             took = float(np.max(steps - steps_prev))  # the chunk's length: an unfinished member ran all of it
             if now > t_prev and took > 0:
-                self.step_time[batch_size] = (now - t_prev) / took
+                times = self.step_times.setdefault(batch_size, deque(maxlen=self.recent_chunks))
+                times.append((now - t_prev) / took)
         else:
             self.start = now
         self.history.append((now, trials, steps))
@@ -128,7 +134,7 @@ class LearnerEta:
         if not busy.any():
             return 0.0
         recent = self.history[max(len(self.history) - 1 - self.window, 0)]
-        if not self.step_time or np.any((trials - recent[1])[busy] <= 0):
+        if not self.step_times or np.any((trials - recent[1])[busy] <= 0):
             return None
         per_trial = [self._steps_per_trial(trials, steps, point)[busy] for point in (recent, self.history[0])]
         per_trial.append((steps / np.maximum(trials, 1.0))[busy])
@@ -150,12 +156,13 @@ class LearnerEta:
         return seconds
 
     def seconds_per_step(self, size: int) -> float:
-        """Time of one step at batch `size` [s]: measured, else a + b ceil(size / devices) fitted to the measured
-        sizes (through one, with a = fixed_learners x b)."""
-        if size in self.step_time:
-            return self.step_time[size]
-        share = np.array([math.ceil(n / self.devices) for n in self.step_time], dtype=np.float64)
-        times = np.array(list(self.step_time.values()))
+        """Time of one step at batch `size` [s]: measured (the median of its newest chunks), else
+        a + b ceil(size / devices) fitted to the measured sizes (through one, with a = fixed_learners x b)."""
+        measured = {n: float(np.median(times)) for n, times in self.step_times.items()}
+        if size in measured:
+            return measured[size]
+        share = np.array([math.ceil(n / self.devices) for n in measured], dtype=np.float64)
+        times = np.array(list(measured.values()))
         if len(set(share)) < 2:
             b = float(np.mean(times / (self.fixed_learners + share)))
             a = self.fixed_learners * b
