@@ -53,7 +53,7 @@ def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None
         reward=jnp.array(0.0),
         u1=None if n_hidden is None else jnp.zeros(n_hidden),
         rows=rows,
-        gain=jnp.array(1.0),
+        gain=jnp.ones(()),  # strong-typed, as the chunk returns it
     )
 
 
