@@ -69,8 +69,8 @@ def parts(cfg):
     def env_step(s, u, plan, hyper):
         unit, draws_ = random_stream.split_uniforms(u, cfg)
         cur = s.env.curriculum
-        shortfall = curriculum.shortfall(cur, cfg)
-        carried, fresh = exploration.noise(unit, hyper, s.env.trials, cur.full_at, 0.0, unit, shortfall, s.env.trial.t)
+        scale = exploration.value_scale(hyper, 0.0, cur.full_at, curriculum.shortfall(cur, cfg), s.env.trial.t)
+        carried, fresh = exploration.noise(unit, hyper, s.env.trials, cur.full_at, scale, unit)
         params = env.EnvParams(plan=plan, drift_neutral_early=hyper.drift_neutral_early > 0)
         new, _ = env.step(s.env, network.torque(carried, fresh, cfg), draws_, params, cfg)
         return s.replace(env=new)

@@ -77,16 +77,7 @@ def quiet(h: Hyper, trials: jax.Array) -> jax.Array:
     return (h.quiet_every > 0) & (jnp.mod(trials + 1, every) == 0)
 
 
-def noise(
-    unit: jax.Array,
-    h: Hyper,
-    trials: jax.Array,
-    full_at: jax.Array,
-    p: jax.Array,
-    prev: jax.Array,
-    shortfall: jax.Array = 0.0,
-    t: jax.Array = 0,
-):
+def noise(unit: jax.Array, h: Hyper, trials: jax.Array, full_at: jax.Array, scale: jax.Array, prev: jax.Array):
     """(2,) rnd of this step, as (carried, fresh): rnd = carried + fresh.
 
     `carried` is the AR(1) share of the previous step's noise, `fresh` this step's draw. The actor adds them in
@@ -97,11 +88,9 @@ def noise(
       h: the learner's hyperparameters.
       trials: () trials ended before this one.
       full_at: () trial count when the curriculum first reached the whole field; negative before.
-      p: () the critic's value of this step's input.
+      scale: () `value_scale`'s factor on the bound at this step.
       prev: (2,) the previous step's rnd (0 at the start of training).
-      shortfall: () 1 - curriculum distance / the whole field's (`value_scale`).
-      t: () steps taken in the trial before this one.
     """
     silent = quiet(h, trials)
-    b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * value_scale(h, p, full_at, shortfall, t))
+    b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * scale)
     return jnp.where(silent, 0.0, h.noise_corr * prev), jnp.sqrt(1.0 - h.noise_corr**2) * b * unit

@@ -57,12 +57,9 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
         agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None, hyper.actor_baseline
     )
     cur = state.env.curriculum
-    shortfall = curriculum.shortfall(cur, cfg)
-    t = state.env.trial.t
-    carried, fresh = exploration.noise(
-        unit, hyper, state.env.trials, cur.full_at, out[0], agent.pending.rnd, shortfall, t
-    )
-    gain = exploration.actor_gain(hyper, exploration.value_scale(hyper, out[0], cur.full_at, shortfall, t))
+    scale = exploration.value_scale(hyper, out[0], cur.full_at, curriculum.shortfall(cur, cfg), state.env.trial.t)
+    carried, fresh = exploration.noise(unit, hyper, state.env.trials, cur.full_at, scale, agent.pending.rnd)
+    gain = exploration.actor_gain(hyper, scale)
     # The carried part joins the outputs before the torque map, in this order, as the oracle rounds it.
     return params, out, loss, u1, carried + fresh, gain, network.torque(out[1:] + carried, fresh, cfg)
 

@@ -199,9 +199,12 @@ def test_exploration_forms_at_their_neutral_values_are_white_noise_bit_for_bit()
     unit = jax.random.uniform(jax.random.PRNGKey(0), (500, 2), minval=-1.0, maxval=1.0)
     p = jax.random.uniform(jax.random.PRNGKey(1), (500,), minval=-0.5, maxval=0.5)
     prev = jax.random.uniform(jax.random.PRNGKey(2), (500, 2), minval=-0.2, maxval=0.2)
-    carried, fresh = jax.vmap(lambda u, v, q: exploration.noise(u, h, jnp.asarray(9), jnp.asarray(-1), v, q))(
-        unit, p, prev
-    )
+
+    def rnd(u, v, q):
+        scale = exploration.value_scale(h, v, jnp.asarray(-1), jnp.asarray(0.5), jnp.asarray(200))
+        return exploration.noise(u, h, jnp.asarray(9), jnp.asarray(-1), scale, q)
+
+    carried, fresh = jax.vmap(rnd)(unit, p, prev)
     assert not np.any(np.asarray(carried))
     np.testing.assert_array_equal(np.asarray(fresh), np.asarray(h.noise * unit))
 
@@ -234,7 +237,7 @@ def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():
     assert [bool(quiet(t, 3.0)) for t in range(7)] == [False, False, True, False, False, True, False]
     assert not any(bool(quiet(t, 0.0)) for t in range(7))
     carried, fresh = exploration.noise(
-        jnp.ones(2), h._replace(quiet_every=jnp.asarray(3.0), noise_corr=jnp.asarray(0.5)), 2, -1, 0.0, jnp.ones(2)
+        jnp.ones(2), h._replace(quiet_every=jnp.asarray(3.0), noise_corr=jnp.asarray(0.5)), 2, -1, 1.0, jnp.ones(2)
     )
     assert not np.any(np.asarray(carried)) and not np.any(np.asarray(fresh))  # quiet: the carried share too
 
@@ -245,7 +248,7 @@ def test_correlated_exploration_keeps_the_spread_of_white_noise():
     unit = jax.random.uniform(jax.random.PRNGKey(5), (200_000, 2), minval=-1.0, maxval=1.0)
 
     def body(prev, u):
-        carried, fresh = exploration.noise(u, h, 0, -1, 0.0, prev)
+        carried, fresh = exploration.noise(u, h, 0, -1, 1.0, prev)
         return carried + fresh, carried + fresh
 
     rnd = np.asarray(jax.lax.scan(body, jnp.zeros(2), unit)[1])[1000:]
