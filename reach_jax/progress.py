@@ -149,9 +149,11 @@ class LearnerEta:
         return (steps - steps_then) / np.maximum(trials - trials_then, 1e-9)
 
     def _seconds(self, steps_left: np.ndarray, n_learners: int) -> float:
+        sizes = [pow2_batch(k, n_learners) for k in range(len(steps_left), 0, -1)]
+        price = {n: self.seconds_per_step(n) for n in set(sizes)}  # a few powers of two, each priced once
         seconds, done = 0.0, 0.0
-        for k, s in zip(range(len(steps_left), 0, -1), np.sort(steps_left), strict=True):
-            seconds += (s - done) * self.seconds_per_step(pow2_batch(k, n_learners))
+        for size, s in zip(sizes, np.sort(steps_left), strict=True):
+            seconds += (s - done) * price[size]
             done = s
         return seconds
 

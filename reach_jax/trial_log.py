@@ -57,10 +57,11 @@ def advance(trace: TrialTrace, hand: jax.Array, hand_vel: jax.Array, t: jax.Arra
     moved = hand - trace.start
     faster = speed > trace.peak_speed
     at_direction = t == max(round(cfg.train.direction_time / cfg.arm.dt), 1)
-    direction = jnp.arctan2(geometry.perpendicular(trace.aim, moved), jnp.dot(trace.aim, moved))
+    across = geometry.perpendicular(trace.aim, moved)
+    direction = jnp.arctan2(across, jnp.dot(trace.aim, moved))
     return trace.replace(
         peak_speed=jnp.where(faster, speed, trace.peak_speed),
-        perp=jnp.where(faster, geometry.perpendicular(trace.aim, moved), trace.perp),
+        perp=jnp.where(faster, across, trace.perp),
         direction=jnp.where(at_direction, direction, trace.direction),
     )
 
