@@ -9,7 +9,8 @@ Per recipe of each run: the exploration it used, the learned hand damping along 
 axis (no field) of each learning condition, the none -> viscous cell, the after-effect, the field's cost to
 random-force and no-past networks, and how many learners stayed at the whole field late in training. The
 figure puts the no-field networks' damping on the x axis: the field (+15.9 N s/m along that axis) can throw an
-arm out only where the learned plus passive damping falls below it.
+arm out only where the learned plus passive damping falls below it. Its last panel, and a line under the table,
+take the same comparison network by network: each no-field network's damping against what the field costs it.
 """
 
 from __future__ import annotations
@@ -19,12 +20,15 @@ import json
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 FIELD_UNSTABLE = 15.9  # the viscous field's eigenvalue along its unstable axis [N s/m] (docs/model.md §6)
 PAPER_NONE_VISCOUS = 0.548  # the paper's none -> viscous success per network (1139 of 2080)
+PAPER_FIELD_COST = 44.8  # the paper's success lost to an unexpected field by its no-field networks [points]
+FULL_TRIALS = 2_000_000  # a full-length run (the paper's trials per network); shorter ones are screens
 
 
 def describe(h: dict) -> str:
@@ -99,6 +103,76 @@ def recipe_rows(run: Path) -> list[dict]:
     return rows
 
 
+def network_points(run: Path) -> list[dict]:
+    """One record per no-field network of a run: its damping along the unstable axis and the field's cost to it."""
+    claims = json.loads((run / "eval" / "claims.json").read_text())
+    impedance = json.loads((run / "eval" / "impedance.json").read_text())["per_network"]
+    table = json.loads((run / "eval" / "table2.json").read_text())["per_network"]
+    damping = {n["learner"]: n["damping_unstable"]["median"] for n in impedance if n["learning"] == n["test"] == "none"}
+    cells = {(t["learner"], t["test"]): t for t in table if t["learning"] == "none"}
+    points = []
+    for learner, d in sorted(damping.items()):
+        on, off = cells.get((learner, "viscous")), cells.get((learner, "none"))
+        if on is None or off is None:
+            continue
+        pairs = on["success"] + on["out"] + on["fail"]
+        points.append(
+            {
+                "run": str(run),
+                "learner": learner,
+                "full_length": claims["trials_per_network"] >= FULL_TRIALS,
+                "damping": d,
+                "success_lost": (off["success"] - on["success"]) / pairs,
+                "out": on["out"] / pairs,
+            }
+        )
+    return points
+
+
+def _ranks(x: np.ndarray) -> np.ndarray:
+    """Ranks 1..n, ties sharing their mean rank."""
+    order = np.argsort(x, kind="stable")
+    ranks = np.empty(len(x))
+    ranks[order] = np.arange(1, len(x) + 1)
+    for value in np.unique(x):
+        tied = x == value
+        ranks[tied] = ranks[tied].mean()
+    return ranks
+
+
+def network_summary(points: list[dict]) -> dict:
+    """Spearman's rank correlation of damping with the success that the field costs and with the outs, and both
+    means on either side of the field's +15.9 N s/m, over the given no-field networks."""
+    d = np.array([p["damping"] for p in points])
+    lost = np.array([p["success_lost"] for p in points])
+    out = np.array([p["out"] for p in points])
+    below = d < FIELD_UNSTABLE
+
+    def rho(y):
+        return float(np.corrcoef(_ranks(d), _ranks(y))[0, 1])
+
+    return {
+        "networks": len(points),
+        "below": int(below.sum()),
+        "rho_lost": rho(lost),
+        "rho_out": rho(out),
+        "lost_below": float(lost[below].mean()) if below.any() else None,
+        "lost_above": float(lost[~below].mean()) if (~below).any() else None,
+        "out_below": float(out[below].mean()) if below.any() else None,
+        "out_above": float(out[~below].mean()) if (~below).any() else None,
+    }
+
+
+def _summary_line(name: str, s: dict) -> str:
+    return (
+        f"{name}: {s['networks']} networks, {s['below']} below +15.9 N s/m; Spearman ρ of damping with the field's"
+        f" cost in success {s['rho_lost']:+.2f}, with its outs {s['rho_out']:+.2f}; below / above +15.9, it costs"
+        f" {_num(None if s['lost_below'] is None else 100 * s['lost_below'], '.1f')} /"
+        f" {_num(None if s['lost_above'] is None else 100 * s['lost_above'], '.1f')} points with"
+        f" {_pct(s['out_below'])} / {_pct(s['out_above'])}% out."
+    )
+
+
 def screen(rows: list[dict]) -> list[dict]:
     """The screening rule fixed before the search (README, second round): a recipe passes when its no-field
     networks' mean damping along the unstable axis is below the field's 15.9 N s/m and every learner was judged
@@ -122,8 +196,8 @@ def _num(x: float | None, fmt: str = ".0f") -> str:
     return "–" if x is None else format(x, fmt)
 
 
-def markdown(rows: list[dict], command: str) -> str:
-    """The map as a Markdown table."""
+def markdown(rows: list[dict], points: list[dict], command: str) -> str:
+    """The map as a Markdown table, with the per-network comparison under it."""
     lines = [
         "**The exploration trade-off**",
         "",
@@ -150,6 +224,15 @@ def markdown(rows: list[dict], command: str) -> str:
             f"{_pct(r['none_viscous_success'])} / {_pct(r['none_viscous_out'])} | {after} | {cost} | "
             f"{r['stable']}/{r['judged']} | {'pass, rank ' + str(r['rank']) if r['passes'] else 'no'} |"
         )
+    full = [p for p in points if p["full_length"]]
+    lines += [
+        "",
+        "Network by network (the no-field networks of these runs; the paper's: 44.8 points, 45% out):",
+        "",
+        f"- {_summary_line('all runs', network_summary(points))}",
+    ]
+    if full:
+        lines.append(f"- {_summary_line('full-length runs only', network_summary(full))}")
     return "\n".join(lines) + "\n"
 
 
@@ -160,10 +243,11 @@ def _stable_share(r: dict, forced: bool) -> float | None:
     return stable / judged if judged else None
 
 
-def figure(rows: list[dict]):
-    """Three panels against the no-field networks' damping: none -> viscous success, the random-force learners'
-    stability, their damping. Filled: every no-field learner of the recipe stable; open: not."""
-    fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
+def figure(rows: list[dict], networks: list[dict]):
+    """Four panels against the no-field networks' damping: per recipe, none -> viscous success, the random-force
+    learners' stability, their damping (filled: every no-field learner of the recipe stable; open: not); per
+    network, the field's cost to it."""
+    fig, axes = plt.subplots(1, 4, figsize=(17, 4.2))
     points = [r for r in rows if r["damping"].get("none") is not None]
     runs = sorted({r["run"] for r in points})
     colours = {run: plt.cm.tab10(i % 10) for i, run in enumerate(runs)}
@@ -172,7 +256,7 @@ def figure(rows: list[dict]):
         ("random-force learners stable late in training [%]", lambda r: _stable_share(r, True), 100.0, None),
         ("random-force networks' damping [N s/m]", lambda r: r["damping"].get("random"), 1.0, None),
     )
-    for ax, (label, value, scale, paper) in zip(axes, panels, strict=True):
+    for ax, (label, value, scale, paper) in zip(axes[:3], panels, strict=True):
         for r in points:
             y = value(r)
             if y is None:
@@ -190,7 +274,28 @@ def figure(rows: list[dict]):
         axes[0].scatter([], [], color=colours[run], label=run.replace("runs/", ""))
     axes[0].legend(fontsize=7, loc="lower right")
     axes[0].text(FIELD_UNSTABLE, 0.02, " field +15.9", fontsize=7, color="0.4", transform=axes[0].get_xaxis_transform())
-    fig.suptitle("Exploration: a compliant arm against stable learning (one point per recipe)", fontsize=10)
+    ax = axes[3]
+    for full, colour, label in ((False, "0.6", "screens (300k trials)"), (True, "tab:blue", "full length (2M)")):
+        chosen = [p for p in networks if p["full_length"] == full]
+        ax.scatter(
+            [p["damping"] for p in chosen],
+            [100 * p["success_lost"] for p in chosen],
+            s=12,
+            color=colour,
+            label=label,
+            zorder=3,
+        )
+    ax.axvline(FIELD_UNSTABLE, color="0.5", ls="--", lw=1)
+    ax.axhline(PAPER_FIELD_COST, color="tab:red", ls=":", lw=1)
+    ax.set_xlabel("no-field network's damping, unstable axis [N s/m]")
+    ax.set_ylabel("success lost to the field, per network [points]")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.suptitle(
+        "Exploration: a compliant arm against stable learning (panels 1-3: one point per recipe; panel 4:"
+        " one per no-field network)",
+        fontsize=10,
+    )
     fig.tight_layout()
     return fig
 
@@ -201,12 +306,14 @@ def main() -> None:
     p.add_argument("--out", type=Path, required=True, help="writes OUT.md and OUT.png")
     args = p.parse_args()
     rows = screen([r for run in args.runs for r in recipe_rows(run)])
+    points = [p for run in args.runs for p in network_points(run)]
     command = "python tools/exploration_map.py " + " ".join(str(r) for r in args.runs) + f" --out {args.out}"
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".md").write_text(markdown(rows, command))
-    args.out.with_suffix(".json").write_text(json.dumps(rows, indent=1) + "\n")
-    figure(rows).savefig(args.out.with_suffix(".png"), dpi=110)
-    print(markdown(rows, command))
+    text = markdown(rows, points, command)
+    args.out.with_suffix(".md").write_text(text)
+    args.out.with_suffix(".json").write_text(json.dumps({"recipes": rows, "networks": points}, indent=1) + "\n")
+    figure(rows, points).savefig(args.out.with_suffix(".png"), dpi=110)
+    print(text)
 
 
 if __name__ == "__main__":
