@@ -56,6 +56,7 @@ def recipe_records(run: Path) -> list[dict]:
                 "holds": verdicts.count("holds"),
                 "in_part": verdicts.count("holds in part"),
                 "cells_near": sum(bool(c["near_paper"]) and all(c["near_paper"].values()) for c in recipe["cells"]),
+                "cells": len(recipe["cells"]),
                 "verdicts": {c["claim"]: c["verdict"] for c in recipe["claims"]},
             }
         )
@@ -80,8 +81,13 @@ def _row(r: dict) -> str:
     )
     return (
         f"| `{r['run']}` | {r['recipe']} | {forms} | {r['learners'] - r['unstable']}/{r['learners']} | {r['holds']} |"
-        f" {r['in_part']} | {r['cells_near']}/8 | {verdicts} |"
+        f" {r['in_part']} | {r['cells_near']}/{r['cells']} | {verdicts} |"
     )
+
+
+def beats_default(heldout: dict, default: dict) -> bool:
+    """Step 3: the winner's held-out run ranks above the default's held-out record in step 2's order."""
+    return order_key(heldout) < order_key(default)
 
 
 def markdown(ranked: list[dict], default: dict, heldout: dict | None, command: str) -> str:
@@ -107,7 +113,7 @@ def markdown(ranked: list[dict], default: dict, heldout: dict | None, command: s
         _row(default),
     ]
     if heldout is not None:
-        beats = order_key(heldout) < order_key(default)
+        beats = beats_default(heldout, default)
         lines += [
             "",
             "The winner on the new held-out seeds:",
@@ -139,7 +145,7 @@ def main() -> None:
         "ranked": ranked,
         "default": default,
         "heldout": heldout,
-        "beats_default": None if heldout is None else order_key(heldout) < order_key(default),
+        "beats_default": None if heldout is None else beats_default(heldout, default),
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".md").write_text(text)
