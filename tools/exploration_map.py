@@ -196,7 +196,7 @@ def _num(x: float | None, fmt: str = ".0f") -> str:
     return "–" if x is None else format(x, fmt)
 
 
-def markdown(rows: list[dict], points: list[dict], command: str) -> str:
+def markdown(rows: list[dict], networks: list[dict], command: str) -> str:
     """The map as a Markdown table, with the per-network comparison under it."""
     lines = [
         "**The exploration trade-off**",
@@ -224,12 +224,13 @@ def markdown(rows: list[dict], points: list[dict], command: str) -> str:
             f"{_pct(r['none_viscous_success'])} / {_pct(r['none_viscous_out'])} | {after} | {cost} | "
             f"{r['stable']}/{r['judged']} | {'pass, rank ' + str(r['rank']) if r['passes'] else 'no'} |"
         )
-    full = [p for p in points if p["full_length"]]
+    full = [p for p in networks if p["full_length"]]
     lines += [
         "",
-        "Network by network (the no-field networks of these runs; the paper's: 44.8 points, 45% out):",
+        "Network by network (the no-field networks of these runs; the paper's lost"
+        f" {PAPER_FIELD_COST:g} points, 45% out):",
         "",
-        f"- {_summary_line('all runs', network_summary(points))}",
+        f"- {_summary_line('all runs', network_summary(networks))}",
     ]
     if full:
         lines.append(f"- {_summary_line('full-length runs only', network_summary(full))}")
@@ -275,7 +276,7 @@ def figure(rows: list[dict], networks: list[dict]):
     axes[0].legend(fontsize=7, loc="lower right")
     axes[0].text(FIELD_UNSTABLE, 0.02, " field +15.9", fontsize=7, color="0.4", transform=axes[0].get_xaxis_transform())
     ax = axes[3]
-    for full, colour, label in ((False, "0.6", "screens (300k trials)"), (True, "tab:blue", "full length (2M)")):
+    for full, colour, label in ((False, "0.6", "screens (under 2M trials)"), (True, "tab:blue", "full length (2M)")):
         chosen = [p for p in networks if p["full_length"] == full]
         ax.scatter(
             [p["damping"] for p in chosen],
@@ -303,16 +304,16 @@ def figure(rows: list[dict], networks: list[dict]):
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
-    p.add_argument("--out", type=Path, required=True, help="writes OUT.md and OUT.png")
+    p.add_argument("--out", type=Path, required=True, help="writes OUT.md, OUT.json and OUT.png")
     args = p.parse_args()
     rows = screen([r for run in args.runs for r in recipe_rows(run)])
-    points = [p for run in args.runs for p in network_points(run)]
+    networks = [p for run in args.runs for p in network_points(run)]
     command = "python tools/exploration_map.py " + " ".join(str(r) for r in args.runs) + f" --out {args.out}"
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    text = markdown(rows, points, command)
+    text = markdown(rows, networks, command)
     args.out.with_suffix(".md").write_text(text)
-    args.out.with_suffix(".json").write_text(json.dumps({"recipes": rows, "networks": points}, indent=1) + "\n")
-    figure(rows, points).savefig(args.out.with_suffix(".png"), dpi=110)
+    args.out.with_suffix(".json").write_text(json.dumps({"recipes": rows, "networks": networks}, indent=1) + "\n")
+    figure(rows, networks).savefig(args.out.with_suffix(".png"), dpi=110)
     print(text)
 
 
