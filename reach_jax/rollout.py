@@ -95,7 +95,9 @@ def learner_step(
     goal, out_of_range, done = outcome.goal, outcome.out_of_range, env.ended(outcome)
     reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)
     terminal = goal | out_of_range
-    pending = learner.Pending(x, out, rnd, ~outcome.cap, terminal, reward, u1=u1, rows=rows, gain=gain)
+    pending = learner.Pending(
+        x=x, out=out, rnd=rnd, valid=~outcome.cap, terminal=terminal, reward=reward, u1=u1, rows=rows, gain=gain
+    )
     n_max = jnp.where(goal, learner.update_n_max(agent.n_max, outcome.t, hyper.lam), agent.n_max)
     trace, record = trace_step(state, new_env, outcome, cfg)
     new = state.replace(

@@ -1,5 +1,6 @@
 """Test-session setup: the CPU compiler options that the command lines set, before JAX starts; shared fixtures."""
 
+import importlib.util
 import signal
 import subprocess
 import sys
@@ -34,6 +35,21 @@ def _train_until_killed(argv: list[str], out: Path, chunk: int = 3) -> Path:
 def train_until_killed():
     """train_until_killed(argv, out, chunk=3) -> the newest checkpoint of a training run killed after that chunk."""
     return _train_until_killed
+
+
+def _load_tool(name: str):
+    """tools/NAME.py imported as a module (the tools are scripts, not a package)."""
+    path = Path(__file__).resolve().parent.parent / "tools" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture
+def load_tool():
+    """load_tool(name) -> tools/<name>.py imported as a module."""
+    return _load_tool
 
 
 def pytest_configure(config):

@@ -2,18 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+import pytest
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location("choose_recipe", ROOT / "tools" / "choose_recipe.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture
+def tool(load_tool):
+    return load_tool("choose_recipe")
 
 
 def _run(
@@ -47,8 +44,7 @@ def _run(
     return run
 
 
-def test_order_puts_stability_first_then_claims_then_cells_then_simplicity(tmp_path):
-    tool = _tool()
+def test_order_puts_stability_first_then_claims_then_cells_then_simplicity(tool, tmp_path):
     holds_more_unstable = _run(tmp_path, "a", stable=(True, False, True, True))
     in_part = _run(tmp_path, "b", verdicts=("holds",) + ("holds in part",) * 4)
     in_part_near = _run(
@@ -63,14 +59,12 @@ def test_order_puts_stability_first_then_claims_then_cells_then_simplicity(tmp_p
     assert ranked_runs == ["d", "c", "b", "a"]
 
 
-def test_forms_changed_reads_float32_values_as_their_defaults():
-    tool = _tool()
+def test_forms_changed_reads_float32_values_as_their_defaults(tool):
     assert tool.forms_changed({"noise": 0.20000000298023224, "lam": 0.9990000128746033}) == []
     assert tool.forms_changed({"noise": 0.1, "actor_gain_power": 2.0}) == ["noise", "actor_gain_power"]
 
 
-def test_short_or_small_runs_do_not_compete(tmp_path):
-    tool = _tool()
+def test_short_or_small_runs_do_not_compete(tool, tmp_path):
     short = _run(tmp_path, "short", trials=300_000)
     small = _run(tmp_path, "small", networks=3)
     full = _run(tmp_path, "full", verdicts=("does not hold",) * 5)
@@ -78,8 +72,7 @@ def test_short_or_small_runs_do_not_compete(tmp_path):
     assert [Path(r["run"]).name for r in ranked] == ["full"]
 
 
-def test_step_three_compares_the_heldout_run_with_the_default_record(tmp_path, monkeypatch, capsys):
-    tool = _tool()
+def test_step_three_compares_the_heldout_run_with_the_default_record(tool, tmp_path, monkeypatch):
     dev = _run(tmp_path, "dev", hypers={"actor_gain_power": 2.0}, verdicts=("holds in part",) * 5)
     default = _run(tmp_path, "default", verdicts=("holds",) + ("holds in part",) * 4)
     heldout = _run(tmp_path, "new", hypers={"actor_gain_power": 2.0}, verdicts=("holds in part",) * 5, near=8)

@@ -2,29 +2,21 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+
+@pytest.fixture
+def tool(load_tool):
+    return load_tool("exploration_map")
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location("exploration_map", ROOT / "tools" / "exploration_map.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_ranks_share_ties():
-    ranks = _tool()._ranks(np.array([3.0, 1.0, 3.0, 2.0]))
+def test_ranks_share_ties(tool):
+    ranks = tool._ranks(np.array([3.0, 1.0, 3.0, 2.0]))
     np.testing.assert_array_equal(ranks, [3.5, 1.0, 3.5, 2.0])
 
 
-def test_summary_of_networks_either_side_of_the_field():
-    tool = _tool()
+def test_summary_of_networks_either_side_of_the_field(tool):
     # damping falls as the loss rises, monotonically but not linearly: Spearman's rho is exactly -1
     damping = [2.0, 5.0, 10.0, 20.0, 40.0]
     lost = [0.6, 0.5, 0.2, 0.05, 0.01]

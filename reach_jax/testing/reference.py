@@ -793,7 +793,8 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     lc = cfg.learner
     reward = lc.reward_goal if goal else (lc.reward_out if out_of_range else 0.0)
     terminal = goal or out_of_range
-    pending = Pending(x, out, rnd, valid=not cap, terminal=terminal, reward=reward, gain=actor_gain(scale, h))
+    gain = actor_gain(scale, h)
+    pending = Pending(x=x, out=out, rnd=rnd, valid=not cap, terminal=terminal, reward=reward, gain=gain)
 
     new = replace(lrn, layers=layers, pending=pending, steps=lrn.steps + 1, pending_learning=lrn.learning)
     if goal:
