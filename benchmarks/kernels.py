@@ -21,8 +21,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from reach_jax import chunk as chunk_lib
-from reach_jax import distribute
+from reach_jax.engine import chunk as chunk_lib
+from reach_jax.engine import distribute
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 

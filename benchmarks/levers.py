@@ -25,8 +25,8 @@ import statistics
 import sys
 from pathlib import Path
 
-from reach_jax import distribute
-from reach_jax.speed import DEFAULT_SPEED
+from reach_jax.config.schema import DEFAULT_SPEED
+from reach_jax.engine import distribute
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from reach_jax import distribute
+from reach_jax.engine import distribute
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -41,7 +41,11 @@ def parts(cfg):
     """Name -> one learner's part of a step, (state, u) -> state, to scan and vmap."""
     import jax.numpy as jnp
 
-    from reach_jax import curriculum, encoding, env, exploration, learner, network, random_stream, rollout
+    from reach_jax import env
+    from reach_jax.agent import exploration, learner, network
+    from reach_jax.engine import random_stream, rollout
+    from reach_jax.env import curriculum
+    from reach_jax.physics import encoding
 
     # Each part's result feeds the carried state in full, so that the compiler removes none of it.
     def draws(s, u):
@@ -92,7 +96,7 @@ def time_part(part, n_learners: int, n_steps: int, cfg) -> float:
     """Median us per step of `part` over a batch of n_learners on one device, draws included."""
     import jax
 
-    from reach_jax import chunk
+    from reach_jax.engine import chunk
 
     learners = throughput.batch_of(n_learners, cfg)
     takes_plan = part.__code__.co_argcount == 4

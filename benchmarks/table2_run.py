@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from reach_jax import checkpoint
-from reach_jax import run_dir as run_dir_io
-from reach_jax.progress import pow2_batch
+from reach_jax.store import checkpoint
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train.progress import pow2_batch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 

@@ -29,11 +29,11 @@ import sys
 import time
 from pathlib import Path
 
-from reach_jax import chunk as chunk_lib
-from reach_jax import distribute
-from reach_jax import run_dir as run_dir_io
-from reach_jax.progress import pow2_batch
-from reach_jax.speed import DEFAULT_SPEED, Speed
+from reach_jax.config.schema import DEFAULT_SPEED, Speed
+from reach_jax.engine import chunk as chunk_lib
+from reach_jax.engine import distribute
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train.progress import pow2_batch
 
 BATCHES = (1, 2, 4, 8, 32, 128, 512)  # learners per batch; 1-8: the Table-2 batch (4 conditions x 2 seeds) and its tail
 TABLE2_TRIALS = 2_000_000  # trials per network (section 4.4)
@@ -75,7 +75,7 @@ def batch_of(n_learners: int, cfg):
     import jax
     import jax.numpy as jnp
 
-    from reach_jax import batch
+    from reach_jax.engine import batch
 
     seeds = -(-n_learners // 4)
     cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, seeds=seeds))

@@ -10,7 +10,9 @@ from pathlib import Path
 import jax.numpy as jnp
 import pytest
 
-from reach_jax import checkpoint, distribute, hyper
+from reach_jax.config import hyper
+from reach_jax.engine import distribute
+from reach_jax.store import checkpoint
 
 
 def _train_until_killed(argv: list[str], out: Path, chunk: int = 3) -> Path:
@@ -37,10 +39,11 @@ def train_until_killed():
     return _train_until_killed
 
 
-def _load_tool(name: str):
-    """tools/NAME.py imported as a module (the tools are scripts, not a package)."""
-    path = Path(__file__).resolve().parent.parent / "tools" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
+def _load_tool(script: str):
+    """SCRIPT.py (a path from the repository's root, such as tools/sync_readme) imported as a module: the tools and
+    the studies are scripts, not a package."""
+    path = Path(__file__).resolve().parent.parent / f"{script}.py"
+    spec = importlib.util.spec_from_file_location(Path(script).name, path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -48,7 +51,7 @@ def _load_tool(name: str):
 
 @pytest.fixture
 def load_tool():
-    """load_tool(name) -> tools/<name>.py imported as a module."""
+    """load_tool(script) -> SCRIPT.py (a path from the repository's root, without .py) imported as a module."""
     return _load_tool
 
 

@@ -11,7 +11,7 @@ import textwrap
 import jax.numpy as jnp
 import pytest
 
-from reach_jax import distribute
+from reach_jax.engine import distribute
 
 
 def _child(code: str) -> dict:
@@ -28,7 +28,10 @@ def test_imports_leave_the_environment_and_jax_alone_and_setup_sets_the_flags():
         """
         import json, os, warnings
         import jax
-        from reach_jax import cli, distribute, evaluate, figures, rollout, train
+        from reach_jax import agent, config, engine, env, evaluate, physics, store, train
+        from reach_jax.engine import distribute, rollout
+        from reach_jax.evaluate import cli as evaluate_cli, figures
+        from reach_jax.train import cli as train_cli
         after_import = (os.environ.get("XLA_FLAGS"), distribute.jax_started(), jax.config.jax_num_cpu_devices)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")

@@ -1,4 +1,4 @@
-"""tools/choose_recipe.py applies the second round's rule (README) to runs' claims.json, in its stated order."""
+"""studies/exploration/choose_recipe.py applies the second round's rule to runs' claims.json, in its stated order."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 @pytest.fixture
 def tool(load_tool):
-    return load_tool("choose_recipe")
+    return load_tool("studies/exploration/choose_recipe")
 
 
 def _run(

@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from reach_jax import claims, stats
-from reach_jax.config import ClaimsConfig, Config
+from reach_jax.config import ClaimsConfig, Config, paper
+from reach_jax.evaluate import claims, report, stats
+from reach_jax.evaluate.verdicts import curriculum_stability
 
 CFG = Config()
 PAIRS = 1040
@@ -41,8 +42,8 @@ def rows_from(cells: dict) -> list[dict]:
 def paper_like() -> dict:
     """Every cell at the paper's per-network values."""
     out = {}
-    for key in claims.PAPER_TABLE2:
-        cell = claims.paper_cell(*key)
+    for key in paper.PAPER_TABLE2:
+        cell = paper.paper_cell(*key)
         out[key] = (100 * cell["success"], 100 * cell["out"], cell["mean_time_s"])
     return out
 
@@ -112,7 +113,7 @@ def test_paper_numbers_make_every_claim_hold_and_every_cell_near():
     assert [got[k]["verdict"] for k in range(1, 6)] == [claims.HOLDS] * 5
     cells = claims.table_cells(claims.Cells(rows_from(paper_like()), PAIRS), CFG.claims)
     assert len(cells) == 8 and all(all(c["near_paper"].values()) for c in cells)
-    md = claims.claims_markdown(
+    md = report.claims_markdown(
         {
             "recipes": [
                 {
@@ -216,10 +217,10 @@ def test_curriculum_stability_counts_setbacks_in_the_tail_only():
             {"learner": 1, "trials": t, "chunk_trials": 10, "distance_m": late_dip},
             {"learner": 2, "trials": min(t, 850), "chunk_trials": 10 if t <= 850 else 0, "distance_m": full},
         ]
-    got = claims.curriculum_stability(metrics, [0, 1, 2], trials, CFG)
+    got = curriculum_stability(metrics, [0, 1, 2], trials, CFG)
     per = {p["learner"]: p for p in got["learners"]}
     assert per[0]["tail_chunks"] == 20 and per[0]["setback_chunks"] == 0 and per[0]["stable"]
     assert per[1]["setback_chunks"] == 2 and per[1]["setback_fraction"] == pytest.approx(0.1) and not per[1]["stable"]
     assert per[2]["tail_chunks"] == 5 and per[2]["stable"]  # chunks after the learner stopped do not count
     assert not got["all_stable"]
-    assert claims.curriculum_stability(metrics, [0, 2], trials, CFG)["all_stable"]
+    assert curriculum_stability(metrics, [0, 2], trials, CFG)["all_stable"]

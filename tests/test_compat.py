@@ -4,8 +4,16 @@ from __future__ import annotations
 
 import pytest
 
-from reach_jax import compat
-from reach_jax.config import CONFIG_VERSION, Config, LearnerConfig, from_dict, from_partial, to_dict, with_defaults
+from reach_jax.config import (
+    CONFIG_VERSION,
+    Config,
+    LearnerConfig,
+    compat,
+    from_dict,
+    from_partial,
+    to_dict,
+    with_defaults,
+)
 
 
 @pytest.mark.parametrize(

@@ -10,9 +10,12 @@ import sys
 import numpy as np
 import pytest
 
-from reach_jax import claims, cli, evaluate, task
-from reach_jax import run_dir as run_dir_io
+from reach_jax import errors, evaluate
 from reach_jax.config import PAPER_CONDITIONS, Config, TaskConfig, condition, from_dict, from_partial, to_dict
+from reach_jax.env import task
+from reach_jax.evaluate import claims
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train import cli as train_cli
 
 CURL = [[0.0, 13.0], [-13.0, 0.0]]  # [N s/m], a curl field: the force turns the hand velocity by 90 degrees
 
@@ -52,7 +55,7 @@ def test_a_stored_force_section_becomes_the_paper_conditions_fields():
 )
 def test_bad_conditions_are_one_line_errors_with_nothing_written(setting, message, tmp_path, capsys):
     out = tmp_path / "run"
-    assert cli.train_main(["--trials", "5", *setting, "--out", str(out), "--quiet"]) == cli.EXIT_USAGE
+    assert train_cli.main(["--trials", "5", *setting, "--out", str(out), "--quiet"]) == errors.EXIT_USAGE
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err, err
     assert not out.exists()

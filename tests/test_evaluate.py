@@ -14,24 +14,16 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from reach_jax import (
-    arm,
-    batch,
-    checkpoint,
-    claims,
-    cli,
-    episodes,
-    evaluate,
-    geometry,
-    network,
-    outcomes,
-    panels,
-    sensor,
-    task,
-    train,
-)
-from reach_jax import run_dir as run_dir_io
-from reach_jax.config import CONDITIONS, Config, TrainConfig, to_json
+from reach_jax import env, errors, evaluate, train
+from reach_jax.agent import network
+from reach_jax.config import CONDITIONS, Config, TrainConfig, paper, to_json
+from reach_jax.engine import batch
+from reach_jax.env import task, trial_log
+from reach_jax.evaluate import cli as evaluate_cli
+from reach_jax.evaluate import episodes, paper_figures
+from reach_jax.physics import arm, sensor
+from reach_jax.store import checkpoint
+from reach_jax.store import run_dir as run_dir_io
 
 TEST_CONDITIONS = Config().eval.test_conditions
 
@@ -110,13 +102,13 @@ def test_lattice_gives_exactly_1040_pairs_none_touching():
 
 
 def test_corner_pairs_join_the_four_corner_cell_centres():
-    starts, targets, corner = panels.corner_pairs(CFG)
+    starts, targets, corner = paper_figures.corner_pairs(CFG)
     assert starts.shape == targets.shape == (12, 2)
     assert np.all(np.any(starts != targets, axis=1))
     (x0, y0), _ = sensor.field_bounds(CFG.sensor)
     half = CFG.sensor.cell_size / 2
     assert [x0 + half, y0 + half] in starts.tolist()
-    np.testing.assert_allclose(starts, panels.corner_centres(CFG)[corner])
+    np.testing.assert_allclose(starts, paper_figures.corner_centres(CFG)[corner])
 
 
 # ---- outcome classes with scripted controllers ----
@@ -124,7 +116,7 @@ def test_corner_pairs_join_the_four_corner_cell_centres():
 
 def test_pd_controller_succeeds_on_every_pair_in_both_tests():
     ep = run_policy(pd_policy, [PD_GAINS])
-    assert np.all(ep.outcome == outcomes.SUCCESS)
+    assert np.all(ep.outcome == env.SUCCESS)
     assert np.all(ep.steps < N_STEPS)
     starts, targets = evaluate.test_pairs(CFG)
     idx = ep.steps[..., None, None]
@@ -140,7 +132,7 @@ def test_pd_controller_succeeds_on_every_pair_in_both_tests():
 
 def test_controller_driving_a_joint_past_its_limit_is_out():
     ep = run_policy(limit_policy, [0.0])
-    assert np.all(ep.outcome == outcomes.OUT)
+    assert np.all(ep.outcome == env.OUT)
     assert np.all(ep.steps < N_STEPS)
     table = evaluate.count(ep.outcome, ep.steps, CFG)
     assert (table["success"], table["out"], table["fail"]) == (0, ep.outcome.size, 0)
@@ -149,7 +141,7 @@ def test_controller_driving_a_joint_past_its_limit_is_out():
 
 def test_zero_torque_fails_at_exactly_4_s():
     ep = run_policy(zero_policy, [0.0])
-    assert np.all(ep.outcome == outcomes.FAIL)
+    assert np.all(ep.outcome == env.FAIL)
     assert np.all(ep.steps == N_STEPS)
     assert np.all(evaluate.trial_times(ep.outcome, ep.steps, CFG) == 4.0)
     assert evaluate.count(ep.outcome, ep.steps, CFG)["mean_time_s"] == 4.0
@@ -179,7 +171,7 @@ def test_counts_are_per_pair_and_summed_over_a_conditions_networks():
 
 def test_mean_time_counts_out_and_fail_as_max_time():
     dt, cap = CFG.arm.dt, CFG.eval.max_time
-    outcome = np.array([outcomes.SUCCESS, outcomes.OUT, outcomes.FAIL, outcomes.SUCCESS])
+    outcome = np.array([env.SUCCESS, env.OUT, env.FAIL, env.SUCCESS])
     steps = np.array([10, 5, N_STEPS, 50])
     np.testing.assert_allclose(evaluate.trial_times(outcome, steps, CFG), [10 * dt, cap, cap, 50 * dt])
     got = evaluate.count(outcome, steps, CFG)
@@ -188,7 +180,7 @@ def test_mean_time_counts_out_and_fail_as_max_time():
 
     # Three networks, two learning conditions: rows sum the networks of a condition.
     out3 = np.broadcast_to(outcome, (3, 2, 4)).copy()
-    out3[2] = outcomes.SUCCESS
+    out3[2] = env.SUCCESS
     steps3 = np.broadcast_to(steps, (3, 2, 4))
     table = evaluate.table2(out3, steps3, [("none", 0), ("none", 1), ("viscous", 0)], [0, 0, 0], CFG)
     rows = {(r["learning"], r["test"]): r for r in table["rows"]}
@@ -232,7 +224,7 @@ def test_learning_condition_mask_reaches_the_policy():
         [task.make_condition("random", CFG).input_mask, task.make_condition("random_nopast", CFG).input_mask]
     )
     ep = run_policy(past_policy, [0.0, 0.0], masks=masks)
-    assert np.all(ep.outcome[1] == outcomes.FAIL)  # no past inputs: no torque, no movement
+    assert np.all(ep.outcome[1] == env.FAIL)  # no past inputs: no torque, no movement
     assert np.ptp(ep.hand[1], axis=-2).max() < 1e-6
     assert np.ptp(ep.hand[0], axis=-2).max() > 1e-3  # the same policy moves the arm when it sees them
 
@@ -266,13 +258,13 @@ def test_aftereffect_pulls_are_displacements_from_the_matched_path():
 
 def test_perpendicular_is_left_positive_on_numpy_and_in_jitted_jax():
     rng = np.random.default_rng(0)
-    aim = geometry.unit(rng.normal(size=(50, 2))).astype(np.float32)
+    aim = trial_log.unit(rng.normal(size=(50, 2))).astype(np.float32)
     rel = rng.normal(size=(50, 2)).astype(np.float32)
-    want = geometry.perpendicular(aim, rel)
+    want = trial_log.perpendicular(aim, rel)
     # One pair at a time, as in the training step; XLA may fuse the multiply-subtract, so only float32-close.
-    got = jax.jit(jax.vmap(geometry.perpendicular))(jnp.asarray(aim), jnp.asarray(rel))
+    got = jax.jit(jax.vmap(trial_log.perpendicular))(jnp.asarray(aim), jnp.asarray(rel))
     np.testing.assert_allclose(np.asarray(got), want, rtol=1e-5, atol=1e-6)
-    assert geometry.perpendicular(np.array([1.0, 0.0]), np.array([0.3, 0.2])) == 0.2  # left of +x is +y
+    assert trial_log.perpendicular(np.array([1.0, 0.0]), np.array([0.3, 0.2])) == 0.2  # left of +x is +y
 
 
 def test_quality_measures_on_known_profiles():
@@ -299,7 +291,7 @@ def test_quality_measures_on_known_profiles():
 def test_minimum_jerk_yardstick_is_straight_single_peaked_and_reaches_every_target():
     starts, targets = evaluate.test_pairs(CFG)
     ep = evaluate.minimum_jerk_episodes(starts, targets, CFG)
-    assert np.all(ep.outcome == outcomes.SUCCESS)
+    assert np.all(ep.outcome == env.SUCCESS)
     q = evaluate.movement_quality(ep, starts, targets, CFG)
     assert q["successful"] == 1040
     assert q["straightness"]["mean"] < 1e-9
@@ -319,9 +311,9 @@ def tiny_run(tmp_path_factory):
 
 
 def _cli_error(run_dir, capsys, must_name):
-    status = cli.evaluate_main([str(run_dir)])
+    status = evaluate_cli.main([str(run_dir)])
     err = capsys.readouterr().err
-    assert status == cli.EXIT_USAGE
+    assert status == errors.EXIT_USAGE
     assert err.count("\n") == 1 and err.startswith("python -m reach_jax.evaluate: error: ")
     assert str(must_name) in err
     assert not (run_dir / evaluate.EVAL_DIR).exists()
@@ -361,7 +353,7 @@ def test_quality_markdown_marks_a_cell_without_successes():
 
 
 def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys):
-    assert cli.evaluate_main([str(tiny_run)]) == 0
+    assert evaluate_cli.main([str(tiny_run)]) == 0
     out = tiny_run / evaluate.EVAL_DIR
     networks = len(batch.learner_table(run_dir_io.read_config(tiny_run).train))
 
@@ -379,7 +371,7 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
         assert r["success"] + r["out"] + r["fail"] == 1040
 
     md = (out / "table2.md").read_text()
-    for s, o, f, t in claims.PAPER_TABLE2.values():
+    for s, o, f, t in paper.PAPER_TABLE2.values():
         assert f"{s}-{o}-{f} ({t:.3g} s)" in md
     for r in t2["first_two"]:
         assert f"{r['success']}-{r['out']}-{r['fail']} ({r['mean_time_s']:.3g} s)" in md
@@ -430,19 +422,19 @@ def test_python_api_evaluates_into_a_chosen_folder_and_loads_the_trained_paramet
 def test_claims_only_decides_the_committed_files_again_as_the_full_evaluation_did(tiny_run, tmp_path, capsys):
     copy = tmp_path / "copy"
     shutil.copytree(tiny_run, copy)
-    assert cli.evaluate_main([str(copy)]) == 0
+    assert evaluate_cli.main([str(copy)]) == 0
     out = copy / evaluate.EVAL_DIR
     full = {n: (out / n).read_bytes() for n in ("claims.json", "claims.md", "table2.md")}
     for name in full:
         (out / name).unlink()
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert cli.evaluate_main([str(copy), "--claims-only"]) == 0
+    assert evaluate_cli.main([str(copy), "--claims-only"]) == 0
     assert {n: (out / n).read_bytes() for n in full} == full  # the same verdicts, byte for byte
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.name not in full} == before  # nothing else touched
     # Without the evaluation's files it is a one-line error, and it takes no other output folder.
-    assert cli.evaluate_main([str(tiny_run), "--claims-only", "--out", str(tmp_path / "x")]) == cli.EXIT_USAGE
+    assert evaluate_cli.main([str(tiny_run), "--claims-only", "--out", str(tmp_path / "x")]) == errors.EXIT_USAGE
     fresh = tmp_path / "fresh"
     shutil.copytree(tiny_run, fresh, ignore=shutil.ignore_patterns(evaluate.EVAL_DIR))
-    assert cli.evaluate_main([str(fresh), "--claims-only"]) == cli.EXIT_USAGE
-    errors = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
-    assert len(errors) == 2 and "--claims-only" in errors[0] and "table2.json: missing" in errors[1]
+    assert evaluate_cli.main([str(fresh), "--claims-only"]) == errors.EXIT_USAGE
+    lines = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
+    assert len(lines) == 2 and "--claims-only" in lines[0] and "table2.json: missing" in lines[1]

@@ -1,4 +1,4 @@
-"""tools/exploration_map.py's network-by-network comparison: ranks, Spearman's rho and the means either side."""
+"""studies/exploration/exploration_map.py, network by network: ranks, Spearman's rho and the means either side."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 
 @pytest.fixture
 def tool(load_tool):
-    return load_tool("exploration_map")
+    return load_tool("studies/exploration/exploration_map")
 
 
 def test_ranks_share_ties(tool):

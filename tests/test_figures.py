@@ -5,14 +5,15 @@ from __future__ import annotations
 import matplotlib.image
 import numpy as np
 
-from reach_jax import evaluate, figures, panels
+from reach_jax import evaluate
 from reach_jax.config import Config
+from reach_jax.evaluate import figures, paper_figures
 
 CFG = Config()
 
 
 def corner_episodes():
-    starts, targets, corner = panels.corner_pairs(CFG)
+    starts, targets, corner = paper_figures.corner_pairs(CFG)
     return evaluate.minimum_jerk_episodes(starts, targets, CFG), starts, targets, corner
 
 
@@ -22,11 +23,11 @@ def path_lines(ax):
 
 def test_fig4_has_six_labelled_panels_with_paths_field_and_goal_squares(tmp_path):
     ep, starts, targets, corner = corner_episodes()
-    drawn = {letter: ep for letter, _, _ in panels.FIG4_PANELS if letter != "f"}
-    fig = figures.fig4(drawn, starts, targets, corner, CFG)
+    drawn = {letter: ep for letter, _, _ in paper_figures.FIG4_PANELS if letter != "f"}
+    fig = paper_figures.fig4(drawn, starts, targets, corner, CFG)
     axes = fig.axes
     assert len(axes) == 6
-    for ax, (letter, learning, test) in zip(axes, panels.FIG4_PANELS, strict=True):
+    for ax, (letter, learning, test) in zip(axes, paper_figures.FIG4_PANELS, strict=True):
         title = ax.get_title()
         assert f"({letter})" in title and f"learning: {learning}" in title and f"test: {test}" in title
         # 4 goal squares around the corner targets and the field outline.
@@ -48,7 +49,7 @@ def test_fig4_has_six_labelled_panels_with_paths_field_and_goal_squares(tmp_path
 
 def test_fig5_plots_speed_over_time_for_panels_a_and_d():
     ep, _, _, corner = corner_episodes()
-    fig = figures.fig5({"a": ep, "d": ep}, corner, CFG)
+    fig = paper_figures.fig5({"a": ep, "d": ep}, corner, CFG)
     axes = fig.axes
     assert len(axes) == 2
     assert "(a)" in axes[0].get_title() and "(d)" in axes[1].get_title()

@@ -7,8 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, episodes, evaluate, impedance, network
+from reach_jax import evaluate
+from reach_jax.agent import network
 from reach_jax.config import Config, condition
+from reach_jax.evaluate import episodes, impedance
+from reach_jax.physics import arm
 
 CFG = Config()
 VISCOUS = condition(CFG, "viscous").viscous

@@ -8,9 +8,11 @@ import jax
 import numpy as np
 import pytest
 
-from reach_jax import batch, episodes, evaluate, outcomes, train
-from reach_jax import run_dir as run_dir_io
+from reach_jax import env, evaluate, train
 from reach_jax.config import Config, TrainConfig
+from reach_jax.engine import batch
+from reach_jax.evaluate import episodes
+from reach_jax.store import run_dir as run_dir_io
 
 CFG = dataclasses.replace(
     Config(), train=dataclasses.replace(TrainConfig(), trials=5000, seeds=2, conditions=("none",), chunk_steps=25_000)
@@ -30,7 +32,7 @@ def _near_successes(group, starts, targets) -> np.ndarray:
             CFG,
         )
     )
-    return np.sum(ep.outcome[:, 0] == outcomes.SUCCESS, axis=-1)
+    return np.sum(ep.outcome[:, 0] == env.SUCCESS, axis=-1)
 
 
 @pytest.mark.slow

@@ -15,15 +15,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reach_jax import checkpoint, cli
-from reach_jax import run_dir as run_dir_io
+from reach_jax import errors
+from reach_jax.engine import distribute
+from reach_jax.store import checkpoint
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train import cli as train_cli
 
 # Two learners on two devices; the viscous one finishes first (chunk 6), so the tail runs one learner on each process.
 ARGV = ["--trials", "150", "--seeds", "1", "--conditions", "none,viscous", "--chunk-steps", "1000", "--quiet"]
 TIMEOUT = 180  # [s] for any one command, so that a hang fails the test instead of stalling the suite
 PROG = "python -m reach_jax.train: error:"
 # The caller's environment without cluster settings.
-ENV = {k: v for k, v in os.environ.items() if k not in cli.CLUSTER_ENV.values()}
+ENV = {k: v for k, v in os.environ.items() if k not in distribute.CLUSTER_ENV.values()}
 
 
 def free_port() -> int:
@@ -103,7 +106,7 @@ def test_two_processes_train_exactly_like_one_process_with_two_devices(tmp_path)
         time.sleep(0.01)
     (status, output), (killed, _) = finish(procs, tmp_path / "logs")
     assert killed == -signal.SIGKILL, "process 1 finished before it could be killed"
-    assert status == cli.EXIT_PEER, output[-3000:]
+    assert status == errors.EXIT_PEER, output[-3000:]
     assert output.splitlines()[-1].startswith(f"{PROG} lost another process") and "Traceback" not in output
 
     results = finish(start_processes(["--resume", str(out), "--quiet"], tmp_path / "resumed"), tmp_path / "resumed")
@@ -132,11 +135,11 @@ def test_two_processes_train_exactly_like_one_process_with_two_devices(tmp_path)
     ],
 )
 def test_bad_cluster_settings_fail_in_one_line_and_write_nothing(argv, env, message, tmp_path, monkeypatch, capsys):
-    for name in cli.CLUSTER_ENV.values():
+    for name in distribute.CLUSTER_ENV.values():
         monkeypatch.delenv(name, raising=False)
     for name, value in env.items():
         monkeypatch.setenv(name, value)
-    assert cli.train_main([*argv, "--out", str(tmp_path / "run"), "--quiet"]) == cli.EXIT_USAGE
+    assert train_cli.main([*argv, "--out", str(tmp_path / "run"), "--quiet"]) == errors.EXIT_USAGE
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(PROG) and message in err, err
     assert list(tmp_path.iterdir()) == []
@@ -147,6 +150,6 @@ def test_multihost_outside_a_cluster_without_settings_fails_in_one_line(tmp_path
     proc = subprocess.run(
         command(["--multihost", "--out", str(tmp_path / "run")]), env=ENV, capture_output=True, text=True, timeout=60
     )
-    assert proc.returncode == cli.EXIT_USAGE, proc.stderr[-3000:]
+    assert proc.returncode == errors.EXIT_USAGE, proc.stderr[-3000:]
     assert proc.stderr.count("\n") == 1 and proc.stderr.startswith(f"{PROG} cannot join the multi-process run")
     assert list(tmp_path.iterdir()) == []

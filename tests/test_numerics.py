@@ -17,9 +17,13 @@ import numpy as np
 import pytest
 from conftest import default_hyper
 
-from reach_jax import arm, curriculum, encoding, env, fields, learner, network, protocol, random_stream, sensor, task
+from reach_jax import env
+from reach_jax.agent import learner, network
 from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_partial
-from reach_jax.learner_state import init_learner
+from reach_jax.engine import random_stream
+from reach_jax.engine.learner_state import init_learner
+from reach_jax.env import curriculum, protocol, task
+from reach_jax.physics import arm, encoding, fields, sensor
 from reach_jax.testing import reference
 from reach_jax.testing.trace import make_trace
 

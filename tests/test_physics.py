@@ -13,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import arm, fields
 from reach_jax.config import PAPER_CONDITIONS, ArmConfig, ConditionConfig
+from reach_jax.physics import arm, fields
 
 N_SAMPLES = 6
 

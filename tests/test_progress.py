@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from reach_jax import config, train
-from reach_jax.progress import LearnerEta, Progress, pow2_batch
+from reach_jax.train.progress import LearnerEta, Progress, pow2_batch
 
 
 def simulated_run(budget: float, fixed: float, chunk: int = 500):

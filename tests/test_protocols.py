@@ -11,10 +11,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from reach_jax import adaptation, batch, checkpoint, cli, evaluate, protocol, train
-from reach_jax import run_dir as run_dir_io
-from reach_jax.chunk import make_chunk
+from reach_jax import errors, evaluate, train
 from reach_jax.config import condition, from_partial
+from reach_jax.engine import batch
+from reach_jax.engine.chunk import make_chunk
+from reach_jax.env import protocol
+from reach_jax.evaluate import adaptation
+from reach_jax.store import checkpoint
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train import cli as train_cli
 
 SWITCH = [
     {"trials": 7, "condition": "none"},
@@ -126,12 +131,12 @@ def protocol_argv(tmp_path):
 def test_a_two_block_protocol_resumes_bit_identically_after_sigkill(tmp_path, train_until_killed):
     argv = protocol_argv(tmp_path)
     whole = tmp_path / "whole"
-    assert cli.train_main([*argv, "--out", str(whole), "--quiet"]) == 0
+    assert train_cli.main([*argv, "--out", str(whole), "--quiet"]) == 0
     assert run_dir_io.read_config(whole).train.trials == 60  # the protocol's length
 
     out = tmp_path / "killed"
     train_until_killed(argv, out)
-    assert cli.train_main(["--resume", str(out), "--quiet"]) == 0
+    assert train_cli.main(["--resume", str(out), "--quiet"]) == 0
 
     final, want = (checkpoint.list_checkpoints(r)[-1] for r in (out, whole))
     assert final.name == want.name
@@ -150,11 +155,11 @@ def test_a_two_block_protocol_resumes_bit_identically_after_sigkill(tmp_path, tr
 def test_networks_start_from_another_run_and_a_missing_one_is_a_one_line_error(tmp_path, capsys):
     source = tmp_path / "source"
     argv = ["--trials", "30", "--seeds", "2", "--conditions", "none,random", "--chunk-steps", "300", "--quiet"]
-    assert cli.train_main([*argv, "--out", str(source)]) == 0
+    assert train_cli.main([*argv, "--out", str(source)]) == 0
     out = tmp_path / "adapt"
     protocol_args = protocol_argv(tmp_path)
     assert (
-        cli.train_main([*protocol_args, "--init-from", str(source), "--keep-every", "1", "--out", str(out), "--quiet"])
+        train_cli.main([*protocol_args, "--init-from", str(source), "--keep-every", "1", "--out", str(out), "--quiet"])
         == 0
     )
     src, _ = run_dir_io.load_params(source)
@@ -169,9 +174,9 @@ def test_networks_start_from_another_run_and_a_missing_one_is_a_one_line_error(t
         (["--set", "network.hidden=[20,10]"], "another network section"),
     ):
         bad = tmp_path / "bad"
-        status = cli.train_main([*protocol_args, *extra, "--init-from", str(source), "--out", str(bad), "--quiet"])
+        status = train_cli.main([*protocol_args, *extra, "--init-from", str(source), "--out", str(bad), "--quiet"])
         err = capsys.readouterr().err
-        assert status == cli.EXIT_USAGE and err.count("\n") == 1 and needle in err, err
+        assert status == errors.EXIT_USAGE and err.count("\n") == 1 and needle in err, err
         assert not bad.exists()
 
 
@@ -187,9 +192,9 @@ def test_networks_start_from_another_run_and_a_missing_one_is_a_one_line_error(t
     ],
 )
 def test_bad_protocols_are_one_line_errors(setting, needle, tmp_path, capsys):
-    status = cli.train_main([*protocol_argv(tmp_path), "--set", setting, "--out", str(tmp_path / "r"), "--quiet"])
+    status = train_cli.main([*protocol_argv(tmp_path), "--set", setting, "--out", str(tmp_path / "r"), "--quiet"])
     err = capsys.readouterr().err
-    assert status == cli.EXIT_USAGE and err.count("\n") == 1 and needle in err, err
+    assert status == errors.EXIT_USAGE and err.count("\n") == 1 and needle in err, err
     assert not (tmp_path / "r").exists()
 
 
@@ -281,7 +286,7 @@ def test_field_sign_points_along_the_push():
 def test_a_protocol_run_evaluates_into_adaptation_files(tmp_path):
     out = tmp_path / "run"
     assert (
-        cli.train_main([*protocol_argv(tmp_path), "--set", "eval.adaptation_window=5", "--out", str(out), "--quiet"])
+        train_cli.main([*protocol_argv(tmp_path), "--set", "eval.adaptation_window=5", "--out", str(out), "--quiet"])
         == 0
     )
     results = evaluate.evaluate(out)

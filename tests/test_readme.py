@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @pytest.fixture
 def tool(load_tool):
-    return load_tool("sync_readme")
+    return load_tool("tools/sync_readme")
 
 
 def test_readme_blocks_match_the_committed_files(tool):

@@ -16,19 +16,30 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from reach_jax import batch, checkpoint, cli, compat, train
-from reach_jax import run_dir as run_dir_io
-from reach_jax.chunk import make_chunk
-from reach_jax.cli import error_line
-from reach_jax.config import CONFIG_VERSION, BlockConfig, ConditionConfig, Config, TrainConfig, from_dict, to_dict
-from reach_jax.errors import printable
-from reach_jax.speed import MAX_HIDDEN_PAD, Speed
+from reach_jax import errors, train
+from reach_jax.config import (
+    CONFIG_VERSION,
+    BlockConfig,
+    ConditionConfig,
+    Config,
+    TrainConfig,
+    compat,
+    from_dict,
+    to_dict,
+)
+from reach_jax.config.schema import MAX_HIDDEN_PAD, Speed
+from reach_jax.engine import batch
+from reach_jax.engine.chunk import make_chunk
+from reach_jax.errors import error_line, printable
+from reach_jax.store import checkpoint
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train import cli as train_cli
 
 ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
 
 
 def cfg_of(argv) -> Config:
-    return cli.parse([*argv, "--out", "/nonexistent-parse-only"]).cfg
+    return train_cli.parse([*argv, "--out", "/nonexistent-parse-only"]).cfg
 
 
 def snapshot(folder: Path) -> dict:
@@ -70,14 +81,14 @@ def edit_meta(path: Path, edit) -> None:
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("whole") / "run"
-    assert cli.train_main([*ARGV, "--out", str(out), "--quiet"]) == 0
+    assert train_cli.main([*ARGV, "--out", str(out), "--quiet"]) == 0
     return out
 
 
 def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path, train_until_killed):
     out = tmp_path / "run"
     killed_at = train_until_killed(ARGV, out)
-    assert cli.train_main(["--resume", str(out), "--quiet"]) == 0
+    assert train_cli.main(["--resume", str(out), "--quiet"]) == 0
     name, arrays = final_arrays(out)
     want_name, want = final_arrays(uninterrupted)
     assert name == want_name and name > killed_at.name
@@ -104,7 +115,7 @@ def edit_config(out: Path, edit) -> None:
 
 def assert_resumes_to(uninterrupted: Path, out: Path, *flags: str) -> None:
     """Resuming out (with flags) ends in the uninterrupted run's final checkpoint, bit for bit."""
-    assert cli.train_main(["--resume", str(out), *flags, "--quiet"]) == 0
+    assert train_cli.main(["--resume", str(out), *flags, "--quiet"]) == 0
     name, arrays = final_arrays(out)
     want_name, want = final_arrays(uninterrupted)
     assert name == want_name
@@ -121,7 +132,7 @@ def test_a_checkpoint_from_before_a_new_config_field_resumes_it_at_its_default(u
     assert_resumes_to(uninterrupted, out)
     # A config of the current version that lacks a field is refused, naming it.
     edit_config(out, lambda data: data.update(version=CONFIG_VERSION))
-    assert cli.train_main(["--resume", str(out), "--quiet"]) == cli.EXIT_USAGE
+    assert train_cli.main(["--resume", str(out), "--quiet"]) == errors.EXIT_USAGE
 
 
 def test_a_run_that_stored_the_retired_hidden_pad_resumes_with_another_pad_bit_identically(uninterrupted, tmp_path):
@@ -153,7 +164,7 @@ def test_a_resume_under_another_sparse_layer1_is_refused_and_an_unstored_one_mea
     assert "\n" not in str(exc.value) and snapshot(out) == before
     # A run stored with it off resumes only with it off.
     edit_meta(older, lambda meta: meta["speed"].update(sparse_layer1=False))
-    assert cli.train_main(["--resume", str(out), "--quiet"]) == cli.EXIT_USAGE
+    assert train_cli.main(["--resume", str(out), "--quiet"]) == errors.EXIT_USAGE
     # Checkpoints written before the setting was stored were all made with it on.
     edit_meta(older, lambda meta: meta.pop("speed"))
     with pytest.raises(checkpoint.CheckpointError, match="speed.sparse_layer1"):
@@ -179,7 +190,7 @@ def test_a_resume_reads_its_checkpoint_once_and_builds_one_batch(uninterrupted, 
     # A fresh run from another run's networks reads that run's checkpoint once too.
     argv = ["--trials", "2", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "100", "--quiet"]
     calls.update(load=0)
-    assert cli.train_main([*argv, "--init-from", str(uninterrupted), "--out", str(tmp_path / "from")]) == 0
+    assert train_cli.main([*argv, "--init-from", str(uninterrupted), "--out", str(tmp_path / "from")]) == 0
     assert calls["load"] == 1
 
 
@@ -192,7 +203,7 @@ def test_a_prepared_run_carries_its_own_settings(uninterrupted, tmp_path):
 
 def test_snapshots_are_kept_every_n_chunks(tmp_path):
     out = tmp_path / "run"
-    assert cli.train_main([*ARGV, "--keep-every", "3", "--out", str(out), "--quiet"]) == 0
+    assert train_cli.main([*ARGV, "--keep-every", "3", "--out", str(out), "--quiet"]) == 0
     chunks = [checkpoint.checkpoint_chunk(p) for p in checkpoint.list_checkpoints(out)]
     last = max(chunks)
     assert last > 7
@@ -202,12 +213,12 @@ def test_snapshots_are_kept_every_n_chunks(tmp_path):
 def test_metrics_past_the_checkpoint_and_torn_lines_are_dropped_on_resume(tmp_path):
     out = tmp_path / "run"
     argv = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "100"]
-    assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == 0
+    assert train_cli.main([*argv, "--out", str(out), "--quiet"]) == 0
     good = (out / run_dir_io.METRICS_FILE).read_text()
     last = json.loads(good.splitlines()[-1])["chunk"]
     later = json.dumps({"chunk": last + 1, "learner": 0})
     (out / run_dir_io.METRICS_FILE).write_text(good + later + "\n" + '{"chunk": ')
-    assert cli.train_main(["--resume", str(out), "--quiet"]) == 0
+    assert train_cli.main(["--resume", str(out), "--quiet"]) == 0
     assert (out / run_dir_io.METRICS_FILE).read_text() == good
 
 
@@ -243,7 +254,7 @@ def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupt
     for run, must_name in cases:
         before = snapshot(run)
         extra = ["--trials", "151"] if run.name == "flag_disagrees" else []
-        assert cli.train_main(["--resume", str(run), *extra, "--quiet"]) == cli.EXIT_USAGE
+        assert train_cli.main(["--resume", str(run), *extra, "--quiet"]) == errors.EXIT_USAGE
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and must_name in err, (run.name, err)
         assert snapshot(run) == before
@@ -266,9 +277,9 @@ class _Injected:
 
 def test_non_finite_learner_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch, capsys):
     real = make_chunk
-    monkeypatch.setattr(train, "make_chunk", lambda cfg, n, *rest: _Injected(real(cfg, n, *rest)))
+    monkeypatch.setattr(train.loop, "make_chunk", lambda cfg, n, *rest: _Injected(real(cfg, n, *rest)))
     out = tmp_path / "run"
-    assert cli.train_main([*ARGV, "--out", str(out), "--quiet"]) == cli.EXIT_NUMERICS
+    assert train_cli.main([*ARGV, "--out", str(out), "--quiet"]) == errors.EXIT_NUMERICS
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "learner 1 (condition random, seed 0)" in err
     newest = checkpoint.list_checkpoints(out)[-1]
@@ -290,7 +301,7 @@ def test_failed_write_stops_cleanly_and_keeps_the_previous_checkpoint(tmp_path, 
 
     monkeypatch.setattr(os, "fsync", failing_fsync)
     out = tmp_path / "run"
-    assert cli.train_main([*ARGV, "--out", str(out), "--quiet"]) == cli.EXIT_IO
+    assert train_cli.main([*ARGV, "--out", str(out), "--quiet"]) == errors.EXIT_IO
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "No space left on device" in err
     newest = checkpoint.list_checkpoints(out)[-1]
@@ -347,8 +358,8 @@ def test_fuzzed_command_lines_never_crash(argv, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     before = snapshot(tmp_path)
     try:
-        inv = cli.parse(argv)
-    except (cli.UsageError, checkpoint.CheckpointError) as exc:
+        inv = train_cli.parse(argv)
+    except (errors.UsageError, checkpoint.CheckpointError) as exc:
         assert str(exc) and "\n" not in str(exc)
     except SystemExit as exc:  # --help and friends
         assert exc.code == 0
@@ -450,8 +461,8 @@ def test_negative_exploration_settings_are_rejected(field):
     ],
 )
 def test_hidden_pad_is_a_checked_speed_setting_not_a_config_field(argv, message):
-    with pytest.raises(cli.UsageError, match=re.escape(message)):
-        cli.parse([*ARGV, *argv, "--out", "/nonexistent-parse-only"])
+    with pytest.raises(errors.UsageError, match=re.escape(message)):
+        train_cli.parse([*ARGV, *argv, "--out", "/nonexistent-parse-only"])
     with pytest.raises(ValueError, match="hidden_pad"):
         Speed(hidden_pad=MAX_HIDDEN_PAD + 1)
     assert "hidden_pad" not in to_dict(Config())["train"]

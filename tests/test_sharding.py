@@ -12,7 +12,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from reach_jax import checkpoint
+from reach_jax.store import checkpoint
 
 N_DEVICES = 2  # host devices in the subprocess; one per core of the CI machine
 
@@ -30,11 +30,11 @@ def test_sharded_chunk_equals_unsharded():
     out = _run(
         f"""
         import dataclasses
-        from reach_jax import distribute
+        from reach_jax.engine import distribute
         distribute.setup_backend({N_DEVICES})
         import jax, jax.numpy as jnp, numpy as np
-        from reach_jax import batch
-        from reach_jax.chunk import make_chunk
+        from reach_jax.engine import batch
+        from reach_jax.engine.chunk import make_chunk
         from reach_jax.config import Config, TrainConfig
 
         assert len(jax.devices()) == {N_DEVICES}
@@ -65,8 +65,8 @@ def test_cli_devices_flag_gives_the_same_run(tmp_path):
         _run(
             f"""
             import sys
-            from reach_jax import cli
-            sys.exit(cli.train_main({[*argv, "--devices", str(devices), "--out", str(out)]!r}))
+            from reach_jax.train import cli
+            sys.exit(cli.main({[*argv, "--devices", str(devices), "--out", str(out)]!r}))
             """
         )
     names = [checkpoint.list_checkpoints(tmp_path / f"d{d}")[-1] for d in (1, N_DEVICES)]

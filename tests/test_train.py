@@ -12,26 +12,8 @@ import numpy as np
 import pytest
 from conftest import default_hyper
 
-from reach_jax import (
-    arm,
-    batch,
-    cli,
-    curriculum,
-    encoding,
-    exploration,
-    fields,
-    hyper,
-    learner,
-    network,
-    protocol,
-    random_stream,
-    rollout,
-    sensor,
-    task,
-    train,
-)
-from reach_jax import run_dir as run_dir_io
-from reach_jax.chunk import make_chunk, narrow_hidden, widen_hidden
+from reach_jax import errors, train
+from reach_jax.agent import exploration, learner, network
 from reach_jax.config import (
     CONDITIONS,
     ConditionConfig,
@@ -39,13 +21,20 @@ from reach_jax.config import (
     LearnerConfig,
     TaskConfig,
     TrainConfig,
+    hyper,
     n_inputs,
     n_past_inputs,
     to_dict,
 )
-from reach_jax.learner_state import init_learner
-from reach_jax.speed import DEFAULT_SPEED, Speed
+from reach_jax.config.schema import DEFAULT_SPEED, Speed
+from reach_jax.engine import batch, random_stream, rollout
+from reach_jax.engine.chunk import make_chunk, narrow_hidden, widen_hidden
+from reach_jax.engine.learner_state import init_learner
+from reach_jax.env import curriculum, protocol, task
+from reach_jax.physics import arm, encoding, fields, sensor
+from reach_jax.store import run_dir as run_dir_io
 from reach_jax.testing.trace import make_trace
+from reach_jax.train import cli as train_cli
 
 CFG = Config()
 
@@ -437,9 +426,9 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
     ]
     for argv in cases:
         out_dir = ["--out", str(tmp_path / "run")] if "--out" not in argv and "--resume" not in argv else []
-        status = cli.train_main([*argv, *out_dir, "--quiet"])
+        status = train_cli.main([*argv, *out_dir, "--quiet"])
         err = capsys.readouterr().err
-        assert status == cli.EXIT_USAGE, argv
+        assert status == errors.EXIT_USAGE, argv
         assert err.count("\n") == 1 and err.startswith("python -m reach_jax.train: error:"), (argv, err)
         assert "Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
@@ -451,25 +440,27 @@ def test_config_file_set_and_flags_build_the_config_in_that_order_through_from_d
     data["train"].update(trials=70, seeds=3)
     path = tmp_path / "cfg.json"
     path.write_text(json.dumps(data))
-    cfg = cli.parse(["--config", str(path), "--set", "train.seeds=4", "--out", str(tmp_path / "r")]).cfg
+    cfg = train_cli.parse(["--config", str(path), "--set", "train.seeds=4", "--out", str(tmp_path / "r")]).cfg
     assert (cfg.task.goal_speed, cfg.train.trials, cfg.train.seeds) == (0.2, 70, 4)
-    cfg = cli.parse(["--config", str(path), "--set", "train.seeds=4", "--seeds", "5", "--out", str(tmp_path / "r")]).cfg
+    cfg = train_cli.parse(
+        ["--config", str(path), "--set", "train.seeds=4", "--seeds", "5", "--out", str(tmp_path / "r")]
+    ).cfg
     assert cfg.train.seeds == 5
     # A hand-written file may hold a few fields and no version; the rest are the defaults.
     path.write_text(json.dumps({"learner": {"lr": 0.5}}))
-    cfg = cli.parse(["--config", str(path), "--out", str(tmp_path / "r")]).cfg
+    cfg = train_cli.parse(["--config", str(path), "--out", str(tmp_path / "r")]).cfg
     assert cfg == dataclasses.replace(Config(), learner=dataclasses.replace(LearnerConfig(), lr=0.5))
     # --set takes an int for a float field, as from_dict does, and checks the result the same way.
-    assert cli.parse(["--set", "arm.dt=1", "--out", str(tmp_path / "r")]).cfg.arm.dt == 1.0
-    with pytest.raises(cli.UsageError, match="arm.length"):
-        cli.parse(["--set", "arm.length=[1, 2, 3]", "--out", str(tmp_path / "r")])
+    assert train_cli.parse(["--set", "arm.dt=1", "--out", str(tmp_path / "r")]).cfg.arm.dt == 1.0
+    with pytest.raises(errors.UsageError, match="arm.length"):
+        train_cli.parse(["--set", "arm.length=[1, 2, 3]", "--out", str(tmp_path / "r")])
     assert not (tmp_path / "r").exists()
 
 
 def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
     argv = ["--trials", "30", "--seeds", "2", "--conditions", "none", "--chunk-steps", "300", "--noise", "0.2"]
     sweep = ["--noise-final-ratio", "0.5,1", "--noise-anneal-delay", "0,5", "--noise-anneal-trials", "10"]
-    cfg = cli.parse([*argv, *sweep, "--out", "/nonexistent-parse-only"]).cfg
+    cfg = train_cli.parse([*argv, *sweep, "--out", "/nonexistent-parse-only"]).cfg
     table, hypers = batch.learner_table(cfg.train), batch.learner_hypers(cfg)
     assert len(table) == len(hypers) == 2 * 2 * 2  # ratios x delays x seeds
     assert [s for _, s in table] == [0, 1] * 4
@@ -480,7 +471,7 @@ def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
     np.testing.assert_array_equal(w[0], w[2])
     assert not np.array_equal(w[0], w[1])
     out = tmp_path / "run"
-    assert cli.train_main([*argv, *sweep, "--out", str(out), "--quiet"]) == 0
+    assert train_cli.main([*argv, *sweep, "--out", str(out), "--quiet"]) == 0
     rows = run_dir_io.read_metrics(out)
     last = [r for r in rows if r["chunk"] == max(q["chunk"] for q in rows)]
     for r in last:
@@ -513,13 +504,13 @@ def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
     # Learners finish their trials in different chunks, so the batch shrinks in the tail; each learner must end
     # exactly as it does when trained alone.
     argv = ["--trials", "40", "--chunk-steps", "250", "--quiet"]
-    assert cli.train_main([*argv, "--seeds", "3", "--conditions", "none,random", "--out", str(tmp_path / "all")]) == 0
+    assert train_cli.main([*argv, "--seeds", "3", "--conditions", "none,random", "--out", str(tmp_path / "all")]) == 0
     rows = run_dir_io.read_metrics(tmp_path / "all")
     finish = {r["learner"]: r["chunk"] for r in rows if r["trials"] >= 40 and r["chunk_trials"] > 0}
     assert len(set(finish.values())) > 1  # the tail ran with fewer learners
     cfg = run_dir_io.read_config(tmp_path / "all")
     whole, _ = run_dir_io.load_batch(tmp_path / "all", cfg)
-    assert cli.train_main([*argv, "--seeds", "2", "--conditions", "random", "--out", str(tmp_path / "one")]) == 0
+    assert train_cli.main([*argv, "--seeds", "2", "--conditions", "random", "--out", str(tmp_path / "one")]) == 0
     alone, _ = run_dir_io.load_batch(tmp_path / "one", run_dir_io.read_config(tmp_path / "one"))
     for i in range(2):
         got = jax.tree.map(lambda a, i=i: np.asarray(a)[3 + i], without_stats(whole.states))
@@ -530,7 +521,7 @@ def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
 def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
     out = tmp_path / "run"
     argv = ["--trials", "2e1", "--seeds", "1", "--conditions", "none,random_nopast", "--chunk-steps", "300"]
-    assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == 0
+    assert train_cli.main([*argv, "--out", str(out), "--quiet"]) == 0
     cfg = run_dir_io.read_config(out)
     assert cfg.train.trials == 20 and cfg.train.conditions == ("none", "random_nopast")
     assert cfg == tiny(conditions=("none", "random_nopast"), chunk_steps=300)
@@ -545,5 +536,5 @@ def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
     np.testing.assert_array_equal(
         np.asarray(group.states.env.trials), [r["trials"] for r in rows if r["chunk"] == chunks]
     )
-    assert cli.train_main([*argv, "--out", str(out), "--quiet"]) == cli.EXIT_USAGE
+    assert train_cli.main([*argv, "--out", str(out), "--quiet"]) == errors.EXIT_USAGE
     assert "--resume" in capsys.readouterr().err

@@ -1,7 +1,7 @@
-"""`python -m reach_jax.evaluate`: the evaluation command line (`reach_jax.cli`)."""
+"""`python -m reach_jax.evaluate`: the evaluation command line (`reach_jax.evaluate.cli`)."""
 
 import sys
 
-from reach_jax import cli
+from reach_jax.evaluate import cli
 
-sys.exit(cli.evaluate_main())
+sys.exit(cli.main())

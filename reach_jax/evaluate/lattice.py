@@ -25,10 +25,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import claims, fields, hyper, sensor, task
-from reach_jax.config import Config
-from reach_jax.outcomes import NAMES as OUTCOME_NAMES
-from reach_jax.outcomes import SUCCESS
+from reach_jax.config import Config, hyper
+from reach_jax.config.paper import PAPER_NETWORKS, PAPER_TABLE2
+from reach_jax.env import task
+from reach_jax.env.environment import OUTCOME_NAMES, SUCCESS
+from reach_jax.physics import fields, sensor
 
 
 def lattice_points(cfg: Config) -> np.ndarray:
@@ -167,7 +168,7 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
         f"Mean per network with its {level:.0%} t-interval over networks (on the logit scale for success and out),"
         f" {table['pairs_per_network']} (start, target) pairs per network; out and fail count as 4.0 s in the mean"
         " time. Beside it, success-out-fail (mean time) summed over our networks of seeds 0 and 1, and the paper's"
-        f" sum over its {claims.PAPER_NETWORKS}"
+        f" sum over its {PAPER_NETWORKS}"
         ' networks. "near paper": success and out within the target\'s percentage points, time within its'
         " fraction (S / O / T).",
     ]
@@ -185,7 +186,7 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
             first = sums.get((cell["learning"], cell["test"], k))
             ours01 = _cell(first["success"], first["out"], first["fail"], first["mean_time_s"]) if first else "–"
             key = (cell["learning"], cell["test"])
-            paper = _cell(*claims.PAPER_TABLE2[key]) if key in claims.PAPER_TABLE2 else "–"
+            paper = _cell(*PAPER_TABLE2[key]) if key in PAPER_TABLE2 else "–"
             near = (
                 " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
                 if cell["near_paper"]

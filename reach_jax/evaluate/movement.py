@@ -13,11 +13,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax import geometry, task
 from reach_jax.config import Config
-from reach_jax.episodes import Episode, n_steps
+from reach_jax.env import task, trial_log
+from reach_jax.env.environment import FAIL, SUCCESS
 from reach_jax.evaluate import lattice
-from reach_jax.outcomes import FAIL, SUCCESS
+from reach_jax.evaluate.episodes import Episode, n_steps
 
 
 def minimum_jerk_speed(u: np.ndarray) -> np.ndarray:
@@ -34,7 +34,7 @@ def straightness(hand: np.ndarray, steps: np.ndarray, starts: np.ndarray, target
       starts, targets: (M, 2) [m].
     """
     valid = np.arange(hand.shape[1])[None, :] <= steps[:, None]
-    perp = np.abs(geometry.perpendicular(geometry.unit(targets - starts)[:, None], hand - starts[:, None]))
+    perp = np.abs(trial_log.perpendicular(trial_log.unit(targets - starts)[:, None], hand - starts[:, None]))
     return np.max(np.where(valid, perp, 0.0), axis=1) / np.linalg.norm(targets - starts, axis=-1)
 
 
@@ -131,7 +131,7 @@ def minimum_jerk_episodes(starts: np.ndarray, targets: np.ndarray, cfg: Config) 
     hand = starts[:, None] + (targets - starts)[:, None] * shape[None, :, None]
     dist = np.linalg.norm(targets - starts, axis=-1)
     speed = dist[:, None] * minimum_jerk_speed(u)[None] / cfg.eval.reference_duration
-    vel = geometry.unit(targets - starts)[:, None] * speed[..., None]
+    vel = trial_log.unit(targets - starts)[:, None] * speed[..., None]
     goal = np.array(
         jax.vmap(jax.vmap(lambda h, v, g: task.goal_reached(h, v, g, cfg), in_axes=(0, 0, None)))(
             jnp.asarray(hand), jnp.asarray(vel), jnp.asarray(targets)

@@ -10,8 +10,9 @@ import math
 
 import numpy as np
 
-from reach_jax import geometry, stats
-from reach_jax.panels import CORNER_NAMES
+from reach_jax.env import trial_log
+from reach_jax.evaluate import stats
+from reach_jax.evaluate.paper_figures import CORNER_NAMES
 
 
 def _deg(v: np.ndarray) -> np.ndarray:
@@ -19,7 +20,7 @@ def _deg(v: np.ndarray) -> np.ndarray:
 
 
 def _angle_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return np.degrees(np.arccos(np.clip(np.sum(geometry.unit(u) * geometry.unit(v), axis=-1), -1.0, 1.0)))
+    return np.degrees(np.arccos(np.clip(np.sum(trial_log.unit(u) * trial_log.unit(v), axis=-1), -1.0, 1.0)))
 
 
 def _json_float(x) -> float | None:
@@ -28,7 +29,7 @@ def _json_float(x) -> float | None:
 
 
 def _circular_mean_deg(v: np.ndarray) -> float | None:
-    u = geometry.unit(v)
+    u = trial_log.unit(v)
     u = u[np.all(np.isfinite(u), axis=-1)]
     if len(u) == 0:
         return None
@@ -50,7 +51,7 @@ def line_deviation(path: np.ndarray, starts: np.ndarray, targets: np.ndarray) ->
       path: (M, T, 2) hand paths [m] (held at their end point after the episode ends).
       starts, targets: (M, 2) [m].
     """
-    side = geometry.perpendicular(geometry.unit(targets - starts)[:, None], path - starts[:, None])
+    side = trial_log.perpendicular(trial_log.unit(targets - starts)[:, None], path - starts[:, None])
     k = np.argmax(np.abs(side), axis=-1)
     return side[np.arange(len(side)), k]
 
@@ -115,7 +116,7 @@ def aftereffect(
         "mean_angle_deg": _json_float(finite.mean()) if len(finite) else None,
         "mean_direction_deg": {"b": _circular_mean_deg(pull_b), "c": _circular_mean_deg(pull_c)},
         "angle_between_mean_directions_deg": _json_float(
-            _angle_between(np.nanmean(geometry.unit(pull_b), axis=0), np.nanmean(geometry.unit(pull_c), axis=0))
+            _angle_between(np.nanmean(trial_log.unit(pull_b), axis=0), np.nanmean(trial_log.unit(pull_c), axis=0))
         ),
         "fraction_opposite_line_deviation": float(opposite.mean()),
         "mean_pull_b_to_force_deg": _json_float(np.nanmean(b_to_force)),

@@ -13,13 +13,14 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from reach_jax import adaptation, claims, figures, files, impedance, task
-from reach_jax import run_dir as run_dir_io
-from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import Config
-from reach_jax.episodes import Episode, Trajectory, network_policy, run_episodes
-from reach_jax.evaluate import lattice, movement, pulls, verdicts
-from reach_jax.panels import FIG4_PANELS, corner_pairs
+from reach_jax.env import task
+from reach_jax.evaluate import adaptation, figures, impedance, lattice, movement, paper_figures, pulls, report, verdicts
+from reach_jax.evaluate.episodes import Episode, Trajectory, network_policy, run_episodes
+from reach_jax.evaluate.paper_figures import FIG4_PANELS, corner_pairs
+from reach_jax.store import files
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.store.checkpoint import CheckpointError
 
 EVAL_DIR = "eval"
 RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "claims")  # each written as NAME.json
@@ -191,7 +192,7 @@ def redecide(run_dir: Path) -> dict:
     source = f"{run_dir} (chunk {table['chunk']})"
     files.atomic_write_bytes(out / "claims.json", json.dumps(result, indent=2).encode())
     files.atomic_write_bytes(out / "table2.md", lattice.table2_markdown(table, decided, source).encode())
-    files.atomic_write_bytes(out / "claims.md", claims.claims_markdown(result, source).encode())
+    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(result, source).encode())
     return result
 
 
@@ -205,11 +206,11 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
     source = f"{run_dir} (chunk {data.chunk})"
     recipes = res["claims"]["recipes"]
     files.atomic_write_bytes(out / "table2.md", lattice.table2_markdown(res["table2"], recipes, source).encode())
-    files.atomic_write_bytes(out / "claims.md", claims.claims_markdown(res["claims"], source).encode())
+    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(res["claims"], source).encode())
     files.atomic_write_bytes(out / "quality.md", movement.quality_markdown(res["quality"], source).encode())
     figures.impedance(res["impedance"], fig.gains, data.learners, cfg).savefig(out / "impedance.png", dpi=110)
-    figures.fig4(fig.panels, fig.starts, fig.targets, fig.start_corner, cfg).savefig(out / "fig4.png", dpi=110)
-    figures.fig5(fig.panels, fig.start_corner, cfg).savefig(out / "fig5.png", dpi=110)
+    paper_figures.fig4(fig.panels, fig.starts, fig.targets, fig.start_corner, cfg).savefig(out / "fig4.png", dpi=110)
+    paper_figures.fig5(fig.panels, fig.start_corner, cfg).savefig(out / "fig5.png", dpi=110)
     figures.learning_curves(data.metrics, cfg).savefig(out / "learning_curves.png", dpi=110)
     if res["adaptation"] is not None:
         files.atomic_write_bytes(out / "adaptation.json", json.dumps(res["adaptation"], indent=2).encode())

@@ -6,8 +6,8 @@ full evaluation and `redecide` (from the committed eval/ files) decide through `
 
 from __future__ import annotations
 
-from reach_jax import claims, stats
-from reach_jax.evaluate import pulls
+from reach_jax.config import Config
+from reach_jax.evaluate import claims, pulls, stats
 
 
 def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
@@ -62,7 +62,41 @@ def decide(
                 "aftereffect": after_k,
                 "cells": claims.table_cells(cells, cfg.claims),
                 "impedance": impedance_cells(imp, nets, level),
-                "curriculum": claims.curriculum_stability(metrics, nets, cfg.train.trials, cfg),
+                "curriculum": curriculum_stability(metrics, nets, cfg.train.trials, cfg),
             }
         )
     return verdicts
+
+
+def curriculum_stability(metrics: list[dict], learners: list[int], trials: int, cfg: Config) -> dict:
+    """Setbacks of the curriculum in the last cfg.claims.curriculum_tail of each learner's trials.
+
+    A chunk counts when the learner ended at least one trial in it and its trial count lies in the tail; it is a
+    setback when the curriculum distance is below curriculum_min_fraction of the whole field.
+    """
+    c = cfg.claims
+    full = cfg.sensor.n_cells * cfg.sensor.cell_size
+    per = []
+    for i in learners:
+        rows = [
+            r
+            for r in metrics
+            if r["learner"] == i and r["chunk_trials"] > 0 and r["trials"] > (1.0 - c.curriculum_tail) * trials
+        ]
+        setbacks = sum(r["distance_m"] < c.curriculum_min_fraction * full for r in rows)
+        fraction = setbacks / len(rows) if rows else None
+        per.append(
+            {
+                "learner": i,
+                "tail_chunks": len(rows),
+                "setback_chunks": setbacks,
+                "setback_fraction": fraction,
+                "stable": fraction is not None and fraction <= c.curriculum_max_setbacks,
+            }
+        )
+    judged = [p for p in per if p["tail_chunks"]]
+    return {
+        "learners": per,
+        "judged": len(judged),
+        "all_stable": bool(per) and len(judged) == len(per) and all(p["stable"] for p in per),
+    }

@@ -17,8 +17,16 @@ from typing import NamedTuple
 
 import numpy as np
 
-from reach_jax import hyper
-from reach_jax.config import ArmConfig, ConditionConfig, Config, LearnerConfig, SensorConfig, blocks_of, condition
+from reach_jax.config import (
+    ArmConfig,
+    ConditionConfig,
+    Config,
+    LearnerConfig,
+    SensorConfig,
+    blocks_of,
+    condition,
+    hyper,
+)
 
 # ---------------------------------------------------------------------------------------------------------------
 # Arm (eq. 4-5, model §1)

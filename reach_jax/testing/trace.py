@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import jax
 
-from reach_jax import chunk, rollout
 from reach_jax.config import Config
-from reach_jax.speed import DEFAULT_SPEED, Speed
+from reach_jax.config.schema import DEFAULT_SPEED, Speed
+from reach_jax.engine import chunk, rollout
 
 
 def make_trace(cfg: Config, n_steps: int, speed: Speed = DEFAULT_SPEED):

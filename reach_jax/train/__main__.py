@@ -1,7 +1,7 @@
-"""`python -m reach_jax.train`: the training command line (`reach_jax.cli`)."""
+"""`python -m reach_jax.train`: the training command line (`reach_jax.train.cli`)."""
 
 import sys
 
-from reach_jax import cli
+from reach_jax.train import cli
 
-sys.exit(cli.train_main())
+sys.exit(cli.main())

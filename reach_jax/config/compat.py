@@ -1,0 +1,122 @@
+"""Reading files that older code wrote: every migration of a config or a checkpoint, keyed by its format version.
+
+A run must resume under the rules it was trained with, so each change of a stored format bumps its version, and
+the reading of each older version is written here once, with a test (tests/test_compat.py).
+"""
+
+from __future__ import annotations
+
+CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
+READABLE_CHECKPOINTS = (2, 3)
+READABLE_CONFIGS = (1, 2, 3, 4, 5)  # `config.CONFIG_VERSION` is the last
+FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
+
+# Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
+ADDED_CONFIG_FIELDS = {
+    3: {"learner": {"noise_value_gate": 0.0}, "train": {"noise_value_gate_grid": []}},
+    4: {"learner": {"noise_value_steps": 0}, "train": {"noise_value_steps_grid": []}},
+    5: {"learner": {"actor_gain_power": 0.0}, "train": {"actor_gain_power_grid": []}},
+}
+
+# Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
+# results (`reach_jax.config.Speed`). Reading drops them, so those runs still load and resume.
+RETIRED_FIELDS = {"train": ("hidden_pad",)}
+
+# Checkpoint format 2 kept these fields of today's state elsewhere (path under ['states'], today -> then).
+_V2_MOVED = (("env.trial.", "env."), ("env.cond.", "cond."), ("env.block.", "block."))
+_V2_MOVED += (("env.curriculum.", "curriculum."), ("env.trials", "counters.trials"))
+# Format-2 files of the first layout stored the state flat, without the groups' names, and the block by its parts.
+_V2_GROUPS = ("agent", "env", "curriculum", "counters")
+_V2_FLAT_RENAMED = {"block.index": "block", "block.learning": "learning", "block.catch": "catch"}
+# State fields that older checkpoints lack: a fresh batch fills them with what those runs trained with. Format-2
+# files of the first layout lack the run's own condition, block 0 and learning on (made before protocols); every
+# file before the actor's gain lacks its value 1 (`exploration.actor_gain`).
+ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "env.block", "agent.pending.gain")
+
+# The result-changing speed settings (`schema.SPEED_RESULT_FIELDS`) of checkpoints written before they were stored.
+SPEED_BEFORE_STORED = {"sparse_layer1": True}
+
+_STATES = "['states']."
+
+
+def state_aliases(name: str, version: int) -> tuple[str, ...]:
+    """Names under which a checkpoint of format `version` may hold today's leaf `name`, most recent layout first."""
+    if version == CHECKPOINT_VERSION or not name.startswith(_STATES):
+        return ()
+    rest = name.removeprefix(_STATES)
+    for new, old in _V2_MOVED:
+        if rest.startswith(new):
+            rest = old + rest.removeprefix(new)
+            break
+    return (_STATES + rest, _STATES + _v2_flat(rest))
+
+
+def _v2_flat(rest: str) -> str:
+    if rest in _V2_FLAT_RENAMED:
+        return _V2_FLAT_RENAMED[rest]
+    group, _, field = rest.partition(".")
+    return field if group in _V2_GROUPS and field else rest
+
+
+def is_added_state_field(name: str) -> bool:
+    """True for a leaf of a state field that old checkpoints may lack and a fresh batch fills."""
+    return name.removeprefix(_STATES).startswith(ADDED_STATE_FIELDS)
+
+
+def retired(section: str, field: str) -> bool:
+    """True for a config field that older runs stored and that reading drops."""
+    return field in RETIRED_FIELDS.get(section, ())
+
+
+def drop_retired(section: str, raw):
+    """A config section's stored fields without the retired ones."""
+    if not isinstance(raw, dict):
+        return raw
+    return {k: v for k, v in raw.items() if not retired(section, k)}
+
+
+def migrate_config(data: dict, version: int) -> dict:
+    """A stored config dict (without its version) in the layout of the current version.
+
+    Version 1 configs left out the fields added during that version's life; each was added with the value that
+    keeps the earlier behaviour, and `config.from_dict` fills it so, except `task.drift_neutral_when_full`, which
+    came in switched on: a config without it trained under the old staircase, so it reads as False. Version 1 also
+    covers the speed fields dropped since (RETIRED_FIELDS) and the `force` section of the time before conditions
+    were data. A complete config of an older version gains the fields of each later one (ADDED_CONFIG_FIELDS).
+    """
+    if version == 1:
+        data = _migrate_version_1(data)
+    for since, sections in ADDED_CONFIG_FIELDS.items():
+        if FIRST_COMPLETE_CONFIG <= version < since:
+            for name, added in sections.items():
+                section = data.get(name, {})
+                if isinstance(section, dict):
+                    data = {**data, name: {**added, **section}}
+    return data
+
+
+def _migrate_version_1(data: dict) -> dict:
+    data = {k: drop_retired(k, v) for k, v in data.items()}
+    task = data.get("task", {})
+    if isinstance(task, dict) and "drift_neutral_when_full" not in task:
+        data["task"] = {**task, "drift_neutral_when_full": False}
+    return _force_as_conditions(data)
+
+
+def _force_as_conditions(data: dict) -> dict:
+    if "force" not in data:
+        return data
+    force = data.pop("force")
+    if not isinstance(force, dict):
+        raise ValueError("force: expected an object")
+    unknown = sorted(set(force) - {"viscous", "random_amplitude"})
+    if unknown:
+        raise ValueError(f"force.{unknown[0]}: unknown field")
+    conditions = dict(data.get("conditions", {}))
+    if "viscous" in force:
+        conditions["viscous"] = {"viscous": force["viscous"], **conditions.get("viscous", {})}
+    if "random_amplitude" in force:
+        for name in ("random", "random_nopast"):
+            amplitude = force["random_amplitude"]
+            conditions[name] = {"random": [amplitude, amplitude], **conditions.get(name, {})}
+    return {**data, "conditions": conditions}

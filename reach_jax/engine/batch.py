@@ -1,0 +1,118 @@
+"""The batch of learners a run trains: who each one is (condition, seed, hyperparameters) and its first state.
+
+A learner's place in the batch is fixed by the config: conditions, then sweep points, then seeds
+(`learner_table`). Every array of a Batch has that learner axis first.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from reach_jax.config import Config, TrainConfig, blocks_of, hyper
+from reach_jax.engine import learner_state
+from reach_jax.env import curriculum, protocol, task
+
+
+class Batch(NamedTuple):
+    """Everything a chunk needs, learner axis first."""
+
+    states: learner_state.LearnerState
+    conds: task.Condition  # the condition each learner ends in: its own, or its protocol's last block's
+    hypers: hyper.Hyper
+    plans: protocol.Plan  # what each learner runs, trial by trial
+
+
+def hyper_grid(cfg: Config) -> list[dict[str, float]]:
+    """Hyperparameter combinations of a sweep, keyed like hyper.Hyper; the learner defaults when nothing is swept."""
+    axes = [getattr(cfg.train, h.grid) or (getattr(cfg.learner, h.name),) for h in hyper.TABLE]
+    return [dict(zip(hyper.NAMES, combo, strict=True)) for combo in itertools.product(*axes)]
+
+
+def learner_hypers(cfg: Config) -> list[dict[str, float]]:
+    """Hyperparameters of every learner, aligned with learner_table."""
+    return [h for _ in learner_names(cfg.train) for h in hyper_grid(cfg) for _ in range(cfg.train.seeds)]
+
+
+def learner_names(train: TrainConfig) -> tuple[str, ...]:
+    """The conditions, then the protocols, that learners run."""
+    return train.conditions + train.protocols
+
+
+def hyper_columns(cfg: Config) -> hyper.Hyper:
+    """hyper.Hyper with one value per learner: (L,) arrays in batch order."""
+    hypers = learner_hypers(cfg)
+    return hyper.Hyper(**{name: jnp.asarray([float(h[name]) for h in hypers]) for name in hyper.NAMES})
+
+
+def learner_table(train: TrainConfig) -> list[tuple[str, int]]:
+    """(condition or protocol, seed index) of every learner, in batch order: name, then sweep point, then seed."""
+    n_grid = math.prod(max(len(getattr(train, h.grid)), 1) for h in hyper.TABLE)
+    return [(c, s) for c in learner_names(train) for _ in range(n_grid) for s in range(train.seeds)]
+
+
+def learner_key(seed: int, index: int) -> jax.Array:
+    """Key of seed index `index`; shared across conditions, so each seed starts from the same weights."""
+    return jax.random.fold_in(jax.random.PRNGKey(seed), index)
+
+
+def conditions(cfg: Config) -> task.Condition:
+    """Every learner's final condition (its protocol's last block's), stacked in batch order."""
+    return task.stack_conditions([blocks_of(cfg, c)[-1].condition for c, _ in learner_table(cfg.train)], cfg)
+
+
+def plans(cfg: Config) -> protocol.Plan:
+    """Every learner's plan, stacked in batch order."""
+    return protocol.stack_plans([c for c, _ in learner_table(cfg.train)], cfg)
+
+
+def init_batch(cfg: Config) -> Batch:
+    """Fresh learners for cfg.train's conditions and protocols x seeds."""
+    table = learner_table(cfg.train)
+    plan = plans(cfg)
+    keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
+    states = jax.vmap(lambda k, p: learner_state.init_learner(k, p, cfg))(keys, plan)
+    # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
+    return Batch(*jax.tree.map(jnp.copy, (states, conditions(cfg), hyper_columns(cfg), plan)))
+
+
+def source_indices(source_table: list[tuple[str, int]], cfg: Config) -> list[int]:
+    """Index in the source run (train.init_from) of each learner's starting network; ValueError if one is missing."""
+    picks = []
+    for name, seed in learner_table(cfg.train):
+        wanted = (blocks_of(cfg, name)[0].condition, seed)
+        if wanted not in source_table:
+            raise ValueError(
+                f"train.init_from: {cfg.train.init_from} has no network of condition {wanted[0]} and seed {seed}"
+            )
+        picks.append(source_table.index(wanted))
+    return picks
+
+
+def start_from(states: learner_state.LearnerState, source, source_table: list[tuple[str, int]], cfg: Config):
+    """Fresh learner states that take the trained networks of another run (train.init_from, model §12).
+
+    Learner (name, seed) takes the network of the source's learner with the same seed index in the condition of
+    its first block (the first such learner of a sweep): its weights, N_max and curriculum distance. Its trials,
+    steps, key and first trial stay its own.
+
+    Args:
+      states: fresh states, learner axis first (`init_batch`).
+      source: the source run's LearnerState at its last checkpoint, learner axis first.
+      source_table: the source's (condition, seed index) per learner.
+      cfg: this run's config.
+    """
+    picks = source_indices(source_table, cfg)
+    taken = jax.tree.map(lambda a: jnp.asarray(a)[jnp.asarray(picks)], source)
+    cur = curriculum.Curriculum(
+        distance=taken.env.curriculum.distance,
+        full_at=jnp.where(taken.env.curriculum.full_at >= 0, 0, -1).astype(jnp.int32),
+    )
+    return states.replace(
+        agent=states.agent.replace(params=jax.tree.map(jnp.copy, taken.agent.params), n_max=taken.agent.n_max),
+        env=states.env.replace(curriculum=cur),
+    )

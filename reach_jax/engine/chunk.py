@@ -1,0 +1,150 @@
+"""Compiled chunks of learner steps: the scan over steps, the padded layout, and sharding over devices (model §5).
+
+Learners never interact, so `make_chunk` shards the learner axis over devices (`distribute`) and each device runs
+its own slice with no communication; the same code runs on CPU host devices, GPU, TPU or several hosts (after
+`jax.distributed.initialize`), only the device list changes. Counts are steps or trials.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jax.sharding import PartitionSpec
+
+from reach_jax.agent import network
+from reach_jax.config import Config
+from reach_jax.config.schema import DEFAULT_SPEED, Speed
+from reach_jax.engine import distribute, random_stream, rollout
+from reach_jax.engine.learner_state import LearnerState
+from reach_jax.env import trial_log
+
+
+def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED, log=None):
+    """lax.scan of `step((state, log), u) -> ((state, log), info)` over n_steps, drawing uniforms in blocks.
+
+    Drawing speed.draw_block steps' uniforms in one vectorised call keeps the random-number loop out of the
+    per-step body, where it cost as many kernel launches as the rest of the step. The stream does not depend on
+    the block size. The steps run on `widen_hidden` weights; the state goes in and comes out with the paper's widths.
+
+    Args:
+      step: one step of one learner, or of a batch when `batched`.
+      state: LearnerState, learner axis first when `batched`.
+      n_steps: steps to take.
+      cfg: model config.
+      batched: state and step carry a leading learner axis.
+      speed: the draw block and the hidden padding.
+      log: carried alongside the state for the step to fill (the per-trial log, `trial_log.TrialBuffer`), or None.
+
+    Returns:
+      (state after n_steps, log after them, info stacked over the steps).
+    """
+
+    def draws(s: LearnerState, n: int) -> jax.Array:
+        if not batched:
+            return random_stream.step_uniforms(s.key, s.counters.steps, n, cfg)
+        u = jax.vmap(lambda k, first: random_stream.step_uniforms(k, first, n, cfg))(s.key, s.counters.steps)
+        return jnp.swapaxes(u, 0, 1)
+
+    def block_body(carry, _):
+        return jax.lax.scan(step, carry, draws(carry[0], block))
+
+    block = speed.draw_block
+    n_blocks, rest = divmod(n_steps, block)
+    carry = (widen_hidden(state, speed.hidden_pad), log)
+    carry, info = jax.lax.scan(block_body, carry, None, length=n_blocks)
+    info = jax.tree.map(lambda a: a.reshape(n_blocks * block, *a.shape[2:]), info)
+    if rest:
+        carry, tail = jax.lax.scan(step, carry, draws(carry[0], rest))
+        info = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), info, tail)
+    state, log = carry
+    return narrow_hidden(state, cfg), log, info
+
+
+def widen_hidden(state: LearnerState, multiple: int) -> LearnerState:
+    """state in the layout of the compiled loops: first hidden layer padded to a multiple of `multiple`, u1 with it.
+
+    Rows of a multiple of 8 float32 fill whole vector registers: the step runs 1.1-1.25x faster with 32 hidden
+    units than with 30 (benchmarks/levers.py), and `network.pad_hidden` keeps the added units inert.
+    Works with or without a leading learner axis.
+    """
+    agent = state.agent
+    params = network.pad_hidden(agent.params, multiple)
+    u1 = agent.pending.u1
+    grow = network.dense_layers(params)[0][0].shape[-1] - u1.shape[-1]
+    u1 = jnp.pad(u1, [(0, 0)] * (u1.ndim - 1) + [(0, grow)])
+    return state.replace(agent=agent.replace(params=params, pending=agent.pending._replace(u1=u1)))
+
+
+def narrow_hidden(state: LearnerState, cfg: Config) -> LearnerState:
+    """Inverse of `widen_hidden`: the paper's layer widths again, exactly."""
+    agent = state.agent
+    u1 = agent.pending.u1[..., : cfg.network.hidden[0]]
+    params = network.unpad_hidden(agent.params, cfg)
+    return state.replace(agent=agent.replace(params=params, pending=agent.pending._replace(u1=u1)))
+
+
+def chunk_body(cfg: Config, n_steps: int, speed: Speed):
+    """Uncompiled chunk of one device: (states, plans, hypers, budget) -> (states, per-trial log or None).
+
+    Stats are reset at the start of the chunk, so they describe this chunk alone.
+    """
+    every = cfg.train.trial_log_every
+    batched = jax.vmap(
+        lambda s, u, p, h, b: rollout.budgeted_step(s, u, p, h, b, cfg, speed), in_axes=(0, 0, 0, 0, None)
+    )
+    fill = jax.vmap(lambda b, i, n: trial_log.log_trial(b, i.ended, i.record, n, every))
+
+    def chunk(states, plans, hypers, budget):
+        counters = states.counters
+        states = states.replace(counters=counters.replace(stats=jax.tree.map(jnp.zeros_like, counters.stats)))
+        n_learners = states.env.trials.shape[0]
+        log = jax.vmap(lambda _: trial_log.empty_buffer(cfg))(jnp.arange(n_learners)) if every else None
+
+        def step_body(carry, u):
+            s, buffers = carry
+            new, info = batched(s, u, plans, hypers, budget)
+            if buffers is not None:
+                buffers = fill(buffers, info, s.env.trials)
+            return (new, buffers), None
+
+        states, log, _ = scan_steps(step_body, states, n_steps, cfg, batched=True, speed=speed, log=log)
+        return states, log
+
+    return chunk
+
+
+def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_SPEED):
+    """Compiled run of n_steps steps for a batch of learners: (states, plans, hypers, budget) -> (states, log).
+
+    The learner axis is the leading axis of every argument; `budget` is a () trial count per learner.
+    `log` is a trial_log.TrialBuffer per learner of the trials logged in the chunk (cfg.train.trial_log_every),
+    or None without a per-trial log. The learner axis is sharded over `distribute.learner_mesh(n_learners,
+    devices)`; the states buffers are donated (speed.donate).
+
+    Args:
+      cfg: model config.
+      n_steps: learner steps per call.
+      devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
+      speed: how the loop is compiled; the result does not depend on it.
+    """
+    chunk = chunk_body(cfg, n_steps, speed)
+    compiled, donated = {}, (0,) if speed.donate else ()
+
+    def run(states, plans, hypers, budget):
+        n_learners = jax.tree.leaves(states)[0].shape[0]
+        mesh = distribute.learner_mesh(n_learners, devices)
+        if mesh.size not in compiled:
+            if mesh.size == 1:
+                compiled[mesh.size] = (None, jax.jit(chunk, donate_argnums=donated))
+            else:
+                spec = PartitionSpec("learners")
+                mapped = jax.shard_map(
+                    chunk, mesh=mesh, in_specs=(spec, spec, spec, PartitionSpec()), out_specs=spec, check_vma=False
+                )
+                compiled[mesh.size] = (mesh, jax.jit(mapped, donate_argnums=donated))
+        mesh, fn = compiled[mesh.size]
+        if mesh is not None:
+            states, plans, hypers = (distribute.on_mesh(t, mesh) for t in (states, plans, hypers))
+        return fn(states, plans, hypers, budget)
+
+    return run

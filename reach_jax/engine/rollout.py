@@ -1,0 +1,175 @@
+"""One learner's step: observe, learn, act, and the environment's step (model §5).
+
+Units: arm state [rad, rad/s], torques [N m], positions [m]; counts are steps or trials. The network takes its
+TS update on the previous step's input as it sees the new one (`learner.ts_step`), then acts with exploration
+noise; the environment (`env.step`) ends trials and starts the next. Compiled chunks of steps are in `chunk`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from reach_jax import env
+from reach_jax.agent import exploration, learner, network
+from reach_jax.config import Config
+from reach_jax.config.hyper import Hyper
+from reach_jax.config.schema import DEFAULT_SPEED, Speed
+from reach_jax.engine import random_stream
+from reach_jax.engine.learner_state import AgentState, LearnerState, Stats, without_params
+from reach_jax.env import curriculum, protocol, task, trial_log
+from reach_jax.physics import encoding
+
+
+class StepInfo(NamedTuple):
+    """What one step did; collected only by traces (`reach_jax.testing.trace`)."""
+
+    x: jax.Array  # (125,) input
+    out: jax.Array  # (3,) outputs before the update
+    rnd: jax.Array  # (2,) exploration noise
+    tau: jax.Array  # (2,) applied torques [N m]
+    arm: jax.Array  # (4,) arm state after the step, before any new trial
+    draws: task.TrialDraws  # draws for the trial that starts if this step ends one
+    goal: jax.Array  # () bool
+    out_of_range: jax.Array  # () bool
+    cap: jax.Array  # () bool
+    loss: jax.Array  # () squared-error loss of the update
+    ended: jax.Array  # () bool: this step ended a trial
+    record: jax.Array | None  # (len(trial_log.COLUMNS),) the ended trial's record; None without a per-trial log
+
+
+def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, learns, cfg: Config, speed: Speed):
+    """TS update on the pending step, then the torques of this one: (params, out, loss, u1, rnd, gain, tau).
+
+    Args:
+      state: the learner.
+      x: (125,) this step's input.
+      rows: this step's non-zero input rows (`encoding.coded_support`).
+      unit: (2,) noise draws in [-1, 1).
+      hyper: its learning constants.
+      learns: () bool, the pending step updates the weights.
+      cfg: model config.
+      speed: only `sparse_layer1` changes the result, and only by float32 rounding.
+    """
+    agent = state.agent
+    sparse = speed.sparse_layer1
+    pending_in = agent.pending if sparse else agent.pending._replace(rows=None)
+    lr = jnp.where(learns, hyper.lr, 0.0)
+    params, out, loss, u1 = learner.ts_step(
+        agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None, hyper.actor_baseline
+    )
+    cur = state.env.curriculum
+    scale = exploration.value_scale(hyper, out[0], cur.full_at, curriculum.shortfall(cur, cfg), state.env.trial.t)
+    carried, fresh = exploration.noise(unit, hyper, state.env.trials, cur.full_at, scale, agent.pending.rnd)
+    gain = exploration.actor_gain(hyper, scale)
+    # The carried part joins the outputs before the torque map, in this order, as the oracle rounds it.
+    return params, out, loss, u1, carried + fresh, gain, network.torque(out[1:] + carried, fresh, cfg)
+
+
+def learner_step(
+    state: LearnerState,
+    u: jax.Array,
+    plan: protocol.Plan,
+    hyper: Hyper,
+    cfg: Config,
+    active=None,
+    speed: Speed = DEFAULT_SPEED,
+):
+    """One learning step of one learner; returns (new state, StepInfo).
+
+    Args:
+      state: the learner.
+      u: (n_uniforms,) this step's draws in [0, 1) (`random_stream.step_uniforms`).
+      plan: its protocol, which picks the condition of each new trial.
+      hyper: its learning constants.
+      cfg: model config.
+      active: optional () bool; False leaves the weights untouched (the caller keeps the rest of the state).
+      speed: how the step is computed; only `sparse_layer1` changes the result, and only by float32 rounding.
+    """
+    agent, trial = state.agent, state.env.trial
+    unit, draws = random_stream.split_uniforms(u, cfg)
+    x = env.observe(state.env, cfg)
+    rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)  # carried in the pending step
+    learns = agent.pending_learning if active is None else active & agent.pending_learning
+    params, out, loss, u1, rnd, gain, tau = act(state, x, rows, unit, hyper, learns, cfg, speed)
+    params_env = env.EnvParams(plan=plan, drift_neutral_early=hyper.drift_neutral_early > 0)
+    new_env, outcome = env.step(state.env, tau, draws, params_env, cfg)
+    goal, out_of_range, done = outcome.goal, outcome.out_of_range, env.ended(outcome)
+    reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)
+    terminal = goal | out_of_range
+    pending = learner.Pending(
+        x=x, out=out, rnd=rnd, valid=~outcome.cap, terminal=terminal, reward=reward, u1=u1, rows=rows, gain=gain
+    )
+    n_max = jnp.where(goal, learner.update_n_max(agent.n_max, outcome.t, hyper.lam), agent.n_max)
+    trace, record = trace_step(state, new_env, outcome, cfg)
+    new = state.replace(
+        agent=AgentState(params=params, pending=pending, pending_learning=state.env.block.learning, n_max=n_max),
+        env=new_env,
+        counters=state.counters.replace(steps=state.counters.steps + 1, stats=count(state, outcome)),
+        trace=trace,
+    )
+    info = StepInfo(
+        x=x,
+        out=out,
+        rnd=rnd,
+        tau=tau,
+        arm=outcome.arm,
+        draws=draws,
+        goal=goal,
+        out_of_range=out_of_range,
+        cap=outcome.cap,
+        loss=loss,
+        ended=done,
+        record=record,
+    )
+    return new, info
+
+
+def count(state: LearnerState, outcome: env.TrialStatus) -> Stats:
+    """The chunk's trial counters after a step with this outcome."""
+    s, done = state.counters.stats, env.ended(outcome)
+    return Stats(
+        trials=s.trials + done,
+        goals=s.goals + outcome.goal,
+        outs=s.outs + outcome.out_of_range,
+        caps=s.caps + outcome.cap,
+        trial_steps=s.trial_steps + jnp.where(done, outcome.t, 0),
+        drifted=s.drifted + (done & state.env.trial.drifted),
+    )
+
+
+def trace_step(state: LearnerState, new_env: env.EnvState, outcome: env.TrialStatus, cfg: Config):
+    """(the trace after a step, the ended trial's record); (None, None) without a per-trial log."""
+    if state.trace is None:
+        return None, None
+    traced = trial_log.advance(state.trace, outcome.hand, outcome.hand_vel, outcome.t, cfg)
+    block = state.env.block
+    record = trial_log.record(traced, block.index, block.catch, outcome.goal, outcome.out_of_range, outcome.t, cfg)
+    started = trial_log.start_trace(new_env.trial.arm, new_env.trial.target, cfg)
+    return jax.tree.map(lambda a, b: jnp.where(env.ended(outcome), a, b), started, traced), record
+
+
+def budgeted_step(
+    state: LearnerState,
+    u: jax.Array,
+    plan: protocol.Plan,
+    hyper: Hyper,
+    budget: jax.Array,
+    cfg: Config,
+    speed: Speed = DEFAULT_SPEED,
+):
+    """learner_step, except that a learner which has ended `budget` trials stays frozen.
+
+    Args:
+      state, u, plan, hyper, speed: one learner, as for learner_step.
+      budget: () trials per learner.
+      cfg: model config.
+    """
+    active = state.env.trials < budget
+    new, info = learner_step(state, u, plan, hyper, cfg, active=active, speed=speed)
+    # The weights of a frozen learner already stay put (zero step size), so the select skips the
+    # largest arrays instead of copying them once more every step.
+    rest = jax.tree.map(lambda a, b: jnp.where(active, a, b), without_params(new), without_params(state))
+    return rest.replace(agent=rest.agent.replace(params=new.agent.params)), info._replace(ended=info.ended & active)

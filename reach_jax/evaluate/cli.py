@@ -1,0 +1,57 @@
+"""The command line `python -m reach_jax.evaluate`: a run directory in, its eval/ files out (`evaluate.evaluate_run`).
+
+Every user error prints one line, "prog: error: message", and exits 2 with nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from reach_jax import evaluate
+from reach_jax.engine import distribute
+from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.store.checkpoint import CheckpointError
+
+
+def build_evaluate_parser() -> argparse.ArgumentParser:
+    """The command-line interface of `python -m reach_jax.evaluate`."""
+    p = Parser(prog="python -m reach_jax.evaluate", description=evaluate.__doc__.splitlines()[0])
+    p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run directory written by reach_jax.train")
+    p.add_argument("--checkpoint", type=Path, metavar="PATH", help="evaluate this checkpoint instead of the newest")
+    p.add_argument("--out", type=Path, metavar="DIR", help="write the results here instead of RUN_DIR/eval")
+    p.add_argument(
+        "--claims-only",
+        action="store_true",
+        help="decide the claims again from RUN_DIR/eval's files (claims.json/.md, table2.md), without new episodes",
+    )
+    return p
+
+
+def main(argv=None) -> int:
+    """`python -m reach_jax.evaluate`; returns the exit status."""
+    parser = build_evaluate_parser()
+    try:
+        args = parser.parse_args(argv)
+        if args.claims_only:
+            if args.checkpoint or args.out:
+                raise UsageError("--claims-only reads and rewrites RUN_DIR/eval: no --checkpoint or --out")
+            evaluate.redecide(args.run_dir)
+            print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
+            return 0
+        distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
+        run = run_dir_io.load(args.run_dir, args.checkpoint)
+    except (UsageError, CheckpointError) as exc:
+        sys.stderr.write(error_line(parser.prog, str(exc)))
+        return EXIT_USAGE
+    results = evaluate.evaluate_run(run)
+    out = args.out or Path(args.run_dir) / evaluate.EVAL_DIR
+    try:
+        evaluate.write_results(args.run_dir, run, results, out)
+    except OSError as exc:
+        sys.stderr.write(error_line(parser.prog, f"{out}: write failed ({exc})"))
+        return EXIT_IO
+    print(f"evaluation written to {out}", file=sys.stderr)
+    return 0

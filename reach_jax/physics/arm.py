@@ -1,0 +1,159 @@
+"""Two-link planar arm: eq. 4-5 of the paper, RK4 integration, joint limits.
+
+Units: joint angles [rad], joint velocities [rad/s], torques [N m], hand position [m] in the shoulder
+frame (x right, y forward), hand velocity [m/s], hand force [N], time [s].
+The arm state is a (4,) array [theta1, theta2, omega1, omega2]; theta1 is measured from +x, theta2 is the
+elbow angle relative to link 1. All functions act on one arm; vmap them for many.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from reach_jax.config import ArmConfig
+from reach_jax.physics import fields
+
+
+def _link_constants(cfg: ArmConfig):
+    m1, m2 = cfg.mass
+    l1, l2 = cfg.length
+    s2 = cfg.com_fraction * l2
+    i1 = cfg.inertia_factor * m1 * l1**2
+    i2 = cfg.inertia_factor * m2 * l2**2
+    return m2, l1, s2, i1, i2
+
+
+def mass_matrix(theta: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Inertia matrix of eq. 4-5.
+
+    Args:
+      theta: (2,) joint angles [rad].
+      cfg: arm constants.
+
+    Returns:
+      (2, 2) inertia matrix [kg m^2].
+    """
+    m2, l1, s2, i1, i2 = _link_constants(cfg)
+    c2 = jnp.cos(theta[1])
+    m12 = i2 + m2 * l1 * s2 * c2
+    m11 = i1 + i2 + 2 * m2 * l1 * s2 * c2 + m2 * l1**2
+    return jnp.array([[m11, m12], [m12, i2]])
+
+
+def velocity_torque(theta: jax.Array, omega: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Coriolis, centripetal and joint-viscosity terms of eq. 4-5, (2,) [N m]."""
+    m2, l1, s2, _, _ = _link_constants(cfg)
+    h = m2 * l1 * s2 * jnp.sin(theta[1])
+    b1, b2 = cfg.joint_viscosity
+    return jnp.array(
+        [
+            -h * (2 * omega[0] + omega[1]) * omega[1] + b1 * omega[0],
+            h * omega[0] ** 2 + b2 * omega[1],
+        ]
+    )
+
+
+def hand_position(theta: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Forward kinematics: (2,) joint angles [rad] -> (2,) hand position [m]."""
+    l1, l2 = cfg.length
+    t12 = theta[0] + theta[1]
+    return jnp.array(
+        [
+            l1 * jnp.cos(theta[0]) + l2 * jnp.cos(t12),
+            l1 * jnp.sin(theta[0]) + l2 * jnp.sin(t12),
+        ]
+    )
+
+
+def jacobian(theta: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """d(hand position)/d(theta): (2,) joint angles [rad] -> (2, 2) [m/rad]."""
+    l1, l2 = cfg.length
+    t12 = theta[0] + theta[1]
+    s1, c1 = jnp.sin(theta[0]), jnp.cos(theta[0])
+    s12, c12 = jnp.sin(t12), jnp.cos(t12)
+    return jnp.array([[-l1 * s1 - l2 * s12, -l2 * s12], [l1 * c1 + l2 * c12, l2 * c12]])
+
+
+def inverse_jacobian(theta: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """J^-1: (2,) joint angles [rad] -> (2, 2) [rad/m], in closed form (adjugate over det J = l1 l2 sin theta2).
+
+    Closed form rather than a LAPACK solve: XLA:CPU runs batched LAPACK calls on its intra-op pool and waits
+    there for them, which with vmap over many states deadlocked the pool on 2 cores (every worker waiting).
+    """
+    j = jacobian(theta, cfg)
+    det = j[0, 0] * j[1, 1] - j[0, 1] * j[1, 0]
+    return jnp.array([[j[1, 1], -j[0, 1]], [-j[1, 0], j[0, 0]]]) / det
+
+
+def hand_velocity(state: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """(4,) arm state -> (2,) hand velocity [m/s]."""
+    return fields.matvec2(jacobian(state[:2], cfg), state[2:])
+
+
+def inverse_kinematics(hand: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """(2,) hand position [m] -> (2,) joint angles [rad] with theta2 in (0, pi) (model §2)."""
+    l1, l2 = cfg.length
+    r2 = hand[0] ** 2 + hand[1] ** 2
+    c2 = jnp.clip((r2 - l1**2 - l2**2) / (2 * l1 * l2), -1.0, 1.0)
+    theta2 = jnp.arccos(c2)
+    theta1 = jnp.arctan2(hand[1], hand[0]) - jnp.arctan2(l2 * jnp.sin(theta2), l1 + l2 * c2)
+    return jnp.array([theta1, theta2])
+
+
+def external_force(state: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Hand force of the field at this arm state, (2,) [N] (`fields.hand_force`).
+
+    Args:
+      state: (4,) arm state.
+      field: the hand-force field.
+      force: (2,) this trial's random force [N].
+      cfg: arm constants.
+    """
+    return fields.hand_force(field, hand_position(state[:2], cfg), hand_velocity(state, cfg), force)
+
+
+def dsdt(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Time derivative of the (4,) arm state under (2,) motor torques [N m] and the hand force."""
+    theta, omega = state[:2], state[2:]
+    hand_force = external_force(state, field, force, cfg)
+    rhs = tau + fields.matvec2(jacobian(theta, cfg).T, hand_force) - velocity_torque(theta, omega, cfg)
+    m = mass_matrix(theta, cfg)
+    det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
+    acc = jnp.array([m[1, 1] * rhs[0] - m[0, 1] * rhs[1], m[0, 0] * rhs[1] - m[1, 0] * rhs[0]]) / det
+    return jnp.concatenate([omega, acc])
+
+
+def rk4(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """One classical RK4 step of length cfg.dt; torque held, field evaluated in every stage."""
+    dt = cfg.dt
+    k1 = dsdt(state, tau, field, force, cfg)
+    k2 = dsdt(state + 0.5 * dt * k1, tau, field, force, cfg)
+    k3 = dsdt(state + 0.5 * dt * k2, tau, field, force, cfg)
+    k4 = dsdt(state + dt * k3, tau, field, force, cfg)
+    return state + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def elbow_stop(state: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Hard stop at theta2 = cfg.theta2_stop: clamp the angle, zero any outward velocity (model §1)."""
+    past = state[1] >= cfg.theta2_stop
+    theta2 = jnp.where(past, cfg.theta2_stop, state[1])
+    omega2 = jnp.where(past, jnp.minimum(state[3], 0.0), state[3])
+    return state.at[1].set(theta2).at[3].set(omega2)
+
+
+def is_out(state: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """True when a joint limit of section 4.2 is crossed: theta1 outside its range or theta2 < min."""
+    lo, hi = cfg.theta1_range
+    return (state[0] < lo) | (state[0] > hi) | (state[1] < cfg.theta2_min)
+
+
+def step(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """RK4 step followed by the elbow stop: the arm's full transition over cfg.dt."""
+    return elbow_stop(rk4(state, tau, field, force, cfg), cfg)
+
+
+def kinetic_energy(state: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """Kinetic energy 0.5 omega^T M omega [J] of a (4,) arm state."""
+    omega = state[2:]
+    return 0.5 * omega @ mass_matrix(state[:2], cfg) @ omega

@@ -1,0 +1,279 @@
+"""Run directories: the one reader and writer of config.json, metrics.jsonl and the learners' checkpoints.
+
+Layout of RUN_DIR: config.json (the whole Config), metrics.jsonl (one JSON object per learner per chunk,
+appended), checkpoints/chunk_NNNNNNN.npz (`checkpoint`), trials/ (the per-trial log, with train.trial_log_every)
+and eval/ (written by `evaluate`).
+Every failure to read is a CheckpointError whose one-line message names the file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from reach_jax.config import Config, compat, first_difference, from_dict, to_dict, to_json
+from reach_jax.config.schema import DEFAULT_SPEED, SPEED_RESULT_FIELDS, Speed
+from reach_jax.engine import batch
+from reach_jax.env import trial_log
+from reach_jax.store import checkpoint, files
+from reach_jax.store.checkpoint import CheckpointError
+
+CONFIG_FILE = "config.json"
+METRICS_FILE = "metrics.jsonl"
+TRIALS_DIR = "trials"  # the per-trial log: one little-endian binary file per column, appended chunk by chunk
+TRIAL_KEYS = {"learner": "<i4", "trial": "<i4", "chunk": "<i4"}  # columns the shell adds to trial_log.COLUMNS
+
+
+def read_config(run_dir: Path) -> Config:
+    """config.json of a run; raises CheckpointError naming the file and field."""
+    path = Path(run_dir) / CONFIG_FILE
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise CheckpointError(f"{path}: missing") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CheckpointError(f"{path}: unreadable ({exc})") from None
+    if not isinstance(data, dict):
+        raise CheckpointError(f"{path}: expected a JSON object")
+    try:
+        return from_dict(data)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: {exc}") from None
+
+
+def create(run_dir: Path, cfg: Config) -> None:
+    """Start a run directory: write config.json and drop any metrics of an earlier attempt."""
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    files.atomic_write_bytes(run_dir / CONFIG_FILE, to_json(cfg).encode())
+    (run_dir / METRICS_FILE).unlink(missing_ok=True)
+    for name in trial_columns():
+        (run_dir / TRIALS_DIR / f"{name}.bin").unlink(missing_ok=True)
+
+
+def holds_run(run_dir: Path) -> bool:
+    """Whether run_dir already has a config.json."""
+    return (Path(run_dir) / CONFIG_FILE).exists()
+
+
+def read_metrics(run_dir: Path, up_to_chunk: float = math.inf) -> list[dict]:
+    """Rows of metrics.jsonl up to a chunk ([] when the run has no finished chunk).
+
+    Raises CheckpointError on a line that is not a JSON object.
+    """
+    path = Path(run_dir) / METRICS_FILE
+    if not path.exists():
+        return []
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CheckpointError(f"{path}: unreadable ({exc})") from None
+    rows = []
+    for n, line in enumerate(text.splitlines(), 1):
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            raise CheckpointError(f"{path}: line {n} is not valid JSON") from None
+        if not isinstance(row, dict):
+            raise CheckpointError(f"{path}: line {n} is not a JSON object")
+        if row.get("chunk", 0) <= up_to_chunk:
+            rows.append(row)
+    return rows
+
+
+def append_metrics(run_dir: Path, rows: list[dict]) -> None:
+    """Append one line per row to metrics.jsonl."""
+    files.append_lines(Path(run_dir) / METRICS_FILE, [json.dumps(r) for r in rows])
+
+
+def truncate_metrics(run_dir: Path, chunk: int) -> None:
+    """Drop metrics lines past `chunk` (and any torn tail), atomically; a resumed run then appends after them."""
+    path = Path(run_dir) / METRICS_FILE
+    if not path.exists():
+        return
+    keep = []
+    for line in path.read_text().splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            break
+        if row.get("chunk", math.inf) > chunk:
+            break
+        keep.append(line)
+    files.atomic_write_bytes(path, "".join(x + "\n" for x in keep).encode())
+
+
+def trial_columns() -> dict[str, str]:
+    """Every column of the per-trial log and its NumPy dtype."""
+    return {**TRIAL_KEYS, **{name: "<f4" for name in trial_log.COLUMNS}}
+
+
+def append_trials(run_dir: Path, columns: dict[str, np.ndarray]) -> None:
+    """Append records (one array per column of `trial_columns`, equal lengths) to the run's per-trial log."""
+    folder = Path(run_dir) / TRIALS_DIR
+    folder.mkdir(exist_ok=True)
+    for name, dtype in trial_columns().items():
+        with open(folder / f"{name}.bin", "ab") as f:
+            f.write(np.asarray(columns[name], dtype).tobytes())
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def _trial_lengths(folder: Path) -> int:
+    """Records that every column holds (a kill mid-append leaves some columns longer)."""
+    sizes = [
+        (folder / f"{n}.bin").stat().st_size // np.dtype(d).itemsize if (folder / f"{n}.bin").exists() else 0
+        for n, d in trial_columns().items()
+    ]
+    return min(sizes)
+
+
+def read_trials(run_dir: Path, up_to_chunk: float = math.inf) -> dict[str, np.ndarray] | None:
+    """The per-trial log up to a chunk, one array per column; None when the run keeps none."""
+    folder = Path(run_dir) / TRIALS_DIR
+    if not folder.is_dir():
+        return None
+    n = _trial_lengths(folder)
+    columns = {name: np.fromfile(folder / f"{name}.bin", dtype, count=n) for name, dtype in trial_columns().items()}
+    keep = int(np.searchsorted(columns["chunk"], up_to_chunk, side="right"))
+    return {name: column[:keep] for name, column in columns.items()}
+
+
+def truncate_trials(run_dir: Path, chunk: int) -> None:
+    """Drop per-trial records past `chunk` (and any torn tail); a resumed run then appends after them."""
+    folder = Path(run_dir) / TRIALS_DIR
+    if not folder.is_dir():
+        return
+    keep = len(read_trials(run_dir, chunk)["chunk"])
+    for name, dtype in trial_columns().items():
+        path = folder / f"{name}.bin"
+        if path.exists():
+            os.truncate(path, keep * np.dtype(dtype).itemsize)
+
+
+def speed_settings(speed: Speed) -> dict:
+    """The settings of `speed` that change results (`SPEED_RESULT_FIELDS`), as a checkpoint stores them."""
+    return {name: getattr(speed, name) for name in SPEED_RESULT_FIELDS}
+
+
+def write_checkpoint(
+    run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config, speed: Speed = DEFAULT_SPEED
+) -> Path:
+    """Save the learner states and hyperparameters after `chunk` chunks, with the config and the speed settings
+    that change results as the run's identity."""
+    tree = {"states": learners.states, "hypers": learners.hypers}
+    meta = {"config": to_dict(cfg), "speed": speed_settings(speed)}
+    return checkpoint.save(run_dir, chunk, tree, meta, cfg.train.keep_every)
+
+
+def check_speed(path: Path, meta: dict, speed: Speed) -> None:
+    """Raise CheckpointError if `speed` would change the results of the run that wrote checkpoint `path`."""
+    stored = meta.get("speed", {})
+    if not isinstance(stored, dict):
+        raise CheckpointError(f"{path}: field speed is not an object")
+    for name, wanted in speed_settings(speed).items():
+        made = stored.get(name, compat.SPEED_BEFORE_STORED[name])
+        if made != wanted:
+            raise CheckpointError(
+                f"{path}: field speed.{name} is {made!r}; resuming with {wanted!r} would change the results"
+            )
+
+
+def load_batch(
+    run_dir: Path, cfg: Config, path: Path | None = None, speed: Speed | None = None
+) -> tuple[batch.Batch, int]:
+    """Newest (or given) checkpoint of a run as a Batch, with its chunk index.
+
+    Raises CheckpointError when there is none, when the config stored in it disagrees with `cfg`, or when
+    `speed` (the speed to continue with; None: not checked) has another setting that changes results.
+    """
+    ckpts = checkpoint.list_checkpoints(run_dir)
+    if path is None and not ckpts:
+        raise CheckpointError(f"{Path(run_dir) / checkpoint.CHECKPOINT_DIR}: no checkpoints")
+    path = path or ckpts[-1]
+    fresh = batch.init_batch(cfg)
+    template = {"states": fresh.states, "hypers": fresh.hypers}
+    # Hyperparameters added since the checkpoint was written take their values from the config, and so do the
+    # fields that say which condition and block a trial runs in: without a protocol they never change.
+    leaves = checkpoint.flatten(template)
+    defaults = {
+        name: leaf
+        for name, leaf in leaves.items()
+        if name.startswith("['hypers']") or compat.is_added_state_field(name)
+    }
+    tree, meta = checkpoint.load(path, template, defaults)
+    try:
+        # Through from_dict, so a stored config of an older version reads as what the run trained with.
+        stored = from_dict(meta["config"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: stored config unreadable ({exc})") from None
+    diff = first_difference(stored, cfg)
+    if diff:
+        raise CheckpointError(f"{path}: field config.{diff} disagrees with {CONFIG_FILE}")
+    if speed is not None:
+        check_speed(path, meta, speed)
+    states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
+    return batch.Batch(states, fresh.conds, hypers, fresh.plans), int(meta["chunk"])
+
+
+class Run(NamedTuple):
+    """Everything read from a run directory: config, learners at one checkpoint, and the metrics up to it."""
+
+    cfg: Config
+    batch: batch.Batch
+    chunk: int  # chunks trained at the checkpoint
+    learners: list  # (condition, seed index) per learner, `batch.learner_table`
+    metrics: list  # metrics.jsonl rows up to `chunk`
+    trials: dict | None  # the per-trial log up to `chunk` (`read_trials`); None when the run keeps none
+
+
+def load(run_dir: Path, path: Path | None = None) -> Run:
+    """A run at its newest (or the given) checkpoint; raises CheckpointError naming the bad path."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise CheckpointError(f"{run_dir}: not a run directory (missing or not a directory)")
+    if path is not None and not Path(path).is_file():
+        raise CheckpointError(f"{path}: no such checkpoint")
+    cfg = read_config(run_dir)
+    learners, chunk = load_batch(run_dir, cfg, path)
+    table = batch.learner_table(cfg.train)
+    return Run(cfg, learners, chunk, table, read_metrics(run_dir, chunk), read_trials(run_dir, chunk))
+
+
+def load_params(run_dir: Path, path: Path | None = None) -> tuple[dict, list[tuple[str, int]]]:
+    """The trained network parameters of a run: a pytree with the learner axis first, and who each learner is.
+
+    Args:
+      run_dir: a run directory written by `reach_jax.train`.
+      path: a checkpoint to read instead of the newest.
+
+    Returns:
+      (params, learners): params as `network.init_params` builds them, each leaf (L, ...);
+      learners[i] = (condition, seed index) of learner i.
+    """
+    run = load(run_dir, path)
+    return run.batch.states.agent.params, run.learners
+
+
+MODEL_SECTIONS = ("arm", "sensor", "encoding", "network")  # what a network's weights mean
+
+
+def load_networks(cfg: Config) -> tuple:
+    """(LearnerState, learner table) at the last checkpoint of cfg.train.init_from, whose model must be cfg's.
+
+    Raises CheckpointError naming the run and the first model field that differs.
+    """
+    source = Path(cfg.train.init_from)
+    stored = read_config(source)
+    for section in MODEL_SECTIONS:
+        if getattr(stored, section) != getattr(cfg, section):
+            raise CheckpointError(f"train.init_from: {source} has another {section} section than this run")
+    learners, _ = load_batch(source, stored)
+    return learners.states, batch.learner_table(stored.train)

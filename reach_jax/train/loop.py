@@ -1,0 +1,131 @@
+"""The training loop: compiled chunks run one after another, each taken by the sinks between chunks (`run`).
+
+Units: trials, steps (of cfg.arm.dt seconds), seconds."""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from reach_jax.config import Config
+from reach_jax.config.schema import DEFAULT_SPEED, Speed
+from reach_jax.engine import batch, distribute
+from reach_jax.engine.chunk import make_chunk
+from reach_jax.store import checkpoint
+from reach_jax.train.core import Finished, NumericsError, chunk_members, finite_learners, merge_members
+from reach_jax.train.metrics import metrics_rows, trial_records
+from reach_jax.train.prepare import Prepared, begin, prepare
+from reach_jax.train.sinks import CheckpointSink, MetricsSink, ProgressSink, Sink
+
+
+def dispatch(run_chunk, group: batch.Batch, states, members: np.ndarray, budget, device_states=None):
+    """Start a chunk on the learners `members` of the host `states`; `device_states`, if given, holds exactly them."""
+
+    def pick(a):
+        return np.asarray(a)[members]
+
+    plans, hypers = group.plans, group.hypers
+    if len(members) < len(np.asarray(states.env.trials)):
+        plans, hypers = jax.tree.map(pick, plans), jax.tree.map(pick, hypers)
+    if device_states is None:
+        device_states = jax.tree.map(pick, states)
+    return run_chunk(device_states, plans, hypers, budget)
+
+
+def numerics_error(ok: np.ndarray, prep: Prepared, chunk: int) -> NumericsError:
+    """The error for the first learner that is not finite after `chunk`."""
+    i = int(np.argmin(ok))
+    cond, seed = batch.learner_table(prep.cfg.train)[i]
+    last = checkpoint.checkpoint_path(prep.run_dir, chunk - 1)  # written by process 0 after the last chunk
+    return NumericsError(
+        f"learner {i} (condition {cond}, seed {seed}) became non-finite in chunk {chunk}; "
+        f"last good checkpoint kept: {last}"
+    )
+
+
+def chunks(prep: Prepared, group: batch.Batch, devices=None) -> Iterator[Finished]:
+    """The run's compiled chunks from `group` until every learner has its trials, each once it has run.
+
+    Each is yielded after the next one is dispatched, so the host's work on it overlaps the devices' work.
+    Raises NumericsError, before anything of that chunk is yielded, when a learner goes non-finite.
+    """
+    budget = prep.cfg.train.trials
+    run_chunk = make_chunk(prep.cfg, prep.cfg.train.chunk_steps, devices, prep.speed)
+    start = functools.partial(dispatch, run_chunk, group, budget=jnp.asarray(budget, jnp.int32))
+    states, index, running = jax.device_get(group.states), prep.chunk, None
+    members = chunk_members(np.asarray(states.env.trials), budget)
+    if len(members):
+        whole = len(members) == len(np.asarray(states.env.trials))
+        running = start(states, members, device_states=group.states if whole else None)
+    while running is not None:
+        # The chunk's learners on this process (an all-gather across hosts with --multihost), copied to the host,
+        # put back among the rest; learners outside the chunk ended no trial in it.
+        (finished, log), running = running, None
+        states = merge_members(states, members, jax.device_get(distribute.to_host(finished)))
+        records = None if log is None else trial_records(distribute.to_host(log), members, index + 1)
+        ran, index = len(members), index + 1
+        ok = finite_learners(states)
+        following = chunk_members(np.asarray(states.env.trials), budget)
+        # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk;
+        # the devices already hold its learners unless the batch shrinks.
+        if ok.all() and len(following):
+            reuse = finished if np.array_equal(following, members) else None
+            members = following
+            running = start(states, members, device_states=reuse)
+        if not ok.all():
+            raise numerics_error(ok, prep, index)
+        yield Finished(index, states, records, ran)
+
+
+def run(
+    cfg: Config | Prepared,
+    run_dir: Path | None = None,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+    stream=None,
+    speed: Speed = DEFAULT_SPEED,
+    devices=None,
+) -> Path:
+    """Train cfg.train's learners in chunks, logging and checkpointing into run_dir; returns run_dir.
+
+    In a multi-process run every process trains the same batch (each its slice) and only process 0 writes
+    run_dir and draws the bar; resuming, every process reads the newest checkpoint, so run_dir must be shared.
+    Raises NumericsError if a learner goes non-finite; the last good checkpoint stays on disk. A resume under
+    another `speed.sparse_layer1` than the run's is refused (CheckpointError): it would change the results.
+
+    Args:
+      cfg: the whole config (`config.Config`; `config.from_dict` builds one from JSON data), or a run that
+        `prepare` checked, which then gives run_dir, resume and speed; its learners are used once.
+      run_dir: where the run lives (default `default_run_dir(cfg.train)`); a fresh run refuses a directory
+        that already holds one (FileExistsError).
+      resume: continue the run in run_dir from its newest checkpoint; cfg must equal its config.json.
+      progress: draw a progress bar on `stream` (default stderr).
+      speed: how the compiled chunk runs (`reach_jax.config.Speed`); the defaults are what every committed run used.
+      devices: devices to spread the learners over (default every device of every process).
+    """
+    if isinstance(cfg, Prepared) and (run_dir is not None or resume or speed != DEFAULT_SPEED):
+        raise TypeError("a prepared run carries its run_dir, resume and speed")
+    prep = cfg if isinstance(cfg, Prepared) else prepare(cfg, run_dir, resume=resume, speed=speed)
+    group = begin(prep)
+    table = batch.learner_table(prep.cfg.train)
+    sinks: list[Sink] = []
+    if jax.process_index() == 0:  # one writer when several processes share the run directory
+        sinks = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
+        if progress:
+            n_devices = len(devices if devices is not None else jax.devices())
+            sinks.append(ProgressSink(prep.cfg.train.trials, len(table), n_devices, stream))
+    started = time.monotonic()
+    for done in chunks(prep, group, devices):
+        rows = metrics_rows(done.states, group.hypers, table, done.index, time.monotonic() - started, prep.cfg)
+        for sink in sinks:
+            sink.chunk(done, rows)
+    for sink in sinks:
+        sink.close()
+    return prep.run_dir
