@@ -2,7 +2,7 @@
 
 Each parses its arguments into a Config (or a run directory), sets up the backend and calls the library
 (`train.run`, `evaluate.evaluate`). Every user error prints one line, "prog: error: message", and exits 2
-with nothing written.
+with nothing written; so does a trainer on a run directory that another live process trains (`run_lock`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import NamedTuple
 import jax
 import numpy as np
 
-from reach_jax import compat, distribute, evaluate, hyper, train
+from reach_jax import compat, distribute, evaluate, hyper, run_lock, train
 from reach_jax import run_dir as run_dir_io
 from reach_jax.checkpoint import CheckpointError
 from reach_jax.config import (
@@ -36,11 +36,13 @@ from reach_jax.config import (
 )
 from reach_jax.errors import OneLineError, printable
 from reach_jax.speed import DEFAULT_SPEED, MAX_HIDDEN_PAD, Speed
+from reach_jax.train import interrupt
 
-EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
+EXIT_USAGE = 2  # bad arguments, config or checkpoint, or a run dir that another live process trains; nothing written
 EXIT_NUMERICS = 3  # a learner went non-finite; the last good checkpoint is kept
 EXIT_IO = 4  # a write failed; the last good checkpoint (or the run) is kept
 EXIT_PEER = 5  # another process of a multi-process run stopped; the last good checkpoint is kept
+EXIT_INTERRUPTED = 6  # stopped by SIGTERM or SIGINT after checkpointing the chunk in flight; resume as it says
 
 # Where --multihost looks for a setting that its flag does not give (jax itself reads only the first).
 CLUSTER_ENV = {
@@ -341,6 +343,7 @@ def validate(args: argparse.Namespace) -> Invocation:
         for flag in ("out", "config"):
             if getattr(args, flag) is not None:
                 raise UsageError(f"--{flag} cannot be combined with --resume (the run's config.json holds it)")
+        run_lock.check_free(args.resume)  # before reading: a live writer prunes checkpoints under a reader
         cfg = run_dir_io.read_config(args.resume)
         try:
             asked = _checked_config(_with_settings(to_dict(cfg), args))
@@ -356,6 +359,7 @@ def validate(args: argparse.Namespace) -> Invocation:
     existing = _first_existing(run_dir)
     if not existing.is_dir():
         raise UsageError(f"--out {run_dir}: {existing} is a file, not a directory")
+    run_lock.check_free(run_dir)
     if run_dir_io.holds_run(run_dir):
         raise UsageError(f"--out {run_dir} already holds a run; use --resume {run_dir}")
     try:
@@ -408,7 +412,7 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
     """Validate, then train; returns the exit status, after printing the one-line error of a failure."""
     try:
         inv, refused = validate(args), None
-    except (UsageError, CheckpointError) as exc:
+    except (UsageError, CheckpointError, run_lock.RunLockedError) as exc:
         inv, refused = None, exc
     try:
         if jax.distributed.is_initialized():
@@ -418,6 +422,13 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
             sys.stderr.write(error_line(prog, str(refused)))
             return EXIT_USAGE
         train.run(inv.prepared, progress=not inv.quiet)
+    except run_lock.RunLockedError as exc:  # another writer took the lock after this one validated
+        sys.stderr.write(error_line(prog, str(exc)))
+        return EXIT_USAGE
+    except interrupt.Interrupted as exc:
+        if jax.process_index() == 0:
+            print(f"{prog}: {exc}, its checkpoint written; resume with: {exc.resume_command()}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except train.NumericsError as exc:
         sys.stderr.write(error_line(prog, str(exc)))
         return EXIT_NUMERICS
@@ -458,10 +469,14 @@ def evaluate_main(argv=None) -> int:
             print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
             return 0
         distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
+        live = run_lock.holder(args.run_dir)
         run = run_dir_io.load(args.run_dir, args.checkpoint)
     except (UsageError, CheckpointError) as exc:
         sys.stderr.write(error_line(parser.prog, str(exc)))
         return EXIT_USAGE
+    if live is not None:
+        note = f"{args.run_dir} is still training ({live}); evaluating its checkpoint after chunk {run.chunk}"
+        sys.stderr.write(f"{parser.prog}: {printable(note)}\n")
     results = evaluate.evaluate_run(run)
     out = args.out or Path(args.run_dir) / evaluate.EVAL_DIR
     try:
