@@ -6,10 +6,11 @@ from __future__ import annotations
 import argparse
 import math
 
-EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
+EXIT_USAGE = 2  # bad arguments, config or checkpoint, or a run dir that another live process trains; nothing written
 EXIT_NUMERICS = 3  # a learner went non-finite; the last good checkpoint is kept
 EXIT_IO = 4  # a write failed; the last good checkpoint (or the run) is kept
 EXIT_PEER = 5  # another process of a multi-process run stopped; the last good checkpoint is kept
+EXIT_INTERRUPTED = 6  # stopped by SIGTERM or SIGINT after checkpointing the chunk in flight; resume as it says
 
 
 def printable(text: str) -> str:

@@ -8,27 +8,74 @@ import time
 from pathlib import Path
 
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 from reach_jax.config import hyper
 from reach_jax.engine import distribute
 from reach_jax.store import checkpoint
+from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train import cli
+
+# A small run of 19 chunks for the tests of interrupted and resumed training.
+ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
 
 
-def _train_until_killed(argv: list[str], out: Path, chunk: int = 3) -> Path:
-    """Run `python -m reach_jax.train ARGV --out OUT --quiet` and SIGKILL it once checkpoint `chunk` is on disk."""
+def snapshot(folder: Path) -> dict:
+    """Every file under folder with its size and modification time."""
+    return {str(p): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def final_arrays(run_dir: Path) -> tuple[str, dict]:
+    """The name and the arrays of a run's newest checkpoint."""
+    path = checkpoint.list_checkpoints(run_dir)[-1]
+    with np.load(path) as data:
+        return path.name, {k: data[k] for k in data.files if k != "__meta__"}
+
+
+def metrics_without_wall(run_dir: Path) -> list[dict]:
+    """A run's metrics rows without their wall-clock times."""
+    rows = run_dir_io.read_metrics(run_dir)
+    return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
+
+
+@pytest.fixture(scope="session")
+def uninterrupted(tmp_path_factory) -> Path:
+    """The ARGV run trained in one go, the reference of every interrupted one."""
+    out = tmp_path_factory.mktemp("whole") / "run"
+    assert cli.main([*ARGV, "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def _train_until(argv: list[str], out: Path, chunk: int, signum: int) -> subprocess.Popen:
+    """Start `python -m reach_jax.train ARGV --out OUT --quiet` and send it `signum` once checkpoint `chunk` is on
+    disk; its stderr is a pipe."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "reach_jax.train", *argv, "--out", str(out), "--quiet"],
         stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
         done = checkpoint.list_checkpoints(out)
         if done and done[-1].name >= checkpoint.checkpoint_path(out, chunk).name:
-            proc.send_signal(signal.SIGKILL)
-            break
+            proc.send_signal(signum)
+            return proc
         time.sleep(0.01)
+    proc.kill()
+    raise AssertionError(f"the run ended (status {proc.wait()}) before checkpoint {chunk}")
+
+
+@pytest.fixture(scope="session")
+def train_until():
+    """train_until(argv, out, chunk, signum) -> the training process, sent signum once checkpoint `chunk` is on disk."""
+    return _train_until
+
+
+def _train_until_killed(argv: list[str], out: Path, chunk: int = 3) -> Path:
+    """Run `python -m reach_jax.train ARGV --out OUT --quiet` and SIGKILL it once checkpoint `chunk` is on disk."""
+    proc = _train_until(argv, out, chunk, signal.SIGKILL)
     assert proc.wait() == -signal.SIGKILL, "the run finished before it could be killed"
     return checkpoint.list_checkpoints(out)[-1]
 

@@ -336,7 +336,7 @@ def test_cli_corrupt_checkpoint_and_metrics(tiny_run, tmp_path, capsys):
     _cli_error(bad, capsys, newest)
     shutil.rmtree(bad)
     shutil.copytree(tiny_run, bad)
-    (bad / run_dir_io.METRICS_FILE).write_text('{"chunk": 1}\n{torn')
+    (bad / run_dir_io.METRICS_FILE).write_text('{"chunk": 1}\n{torn\n')
     _cli_error(bad, capsys, bad / run_dir_io.METRICS_FILE)
 
 

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import ARGV, final_arrays, metrics_without_wall, snapshot
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -31,31 +32,13 @@ from reach_jax.config.schema import MAX_HIDDEN_PAD, Speed
 from reach_jax.engine import batch
 from reach_jax.engine.chunk import make_chunk
 from reach_jax.errors import error_line, printable
-from reach_jax.store import checkpoint
+from reach_jax.store import checkpoint, run_lock
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import cli as train_cli
-
-ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
 
 
 def cfg_of(argv) -> Config:
     return train_cli.parse([*argv, "--out", "/nonexistent-parse-only"]).cfg
-
-
-def snapshot(folder: Path) -> dict:
-    """Every file under folder with its size and modification time."""
-    return {str(p): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*")) if p.is_file()}
-
-
-def final_arrays(run_dir: Path) -> tuple[str, dict]:
-    path = checkpoint.list_checkpoints(run_dir)[-1]
-    with np.load(path) as data:
-        return path.name, {k: data[k] for k in data.files if k != "__meta__"}
-
-
-def metrics_without_wall(run_dir: Path) -> list[dict]:
-    rows = run_dir_io.read_metrics(run_dir)
-    return [{k: v for k, v in r.items() if k != "wall_s"} for r in rows]
 
 
 def copy_run(src: Path, dst: Path) -> Path:
@@ -78,16 +61,11 @@ def edit_meta(path: Path, edit) -> None:
     np.savez(path, **arrays)
 
 
-@pytest.fixture(scope="module")
-def uninterrupted(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("whole") / "run"
-    assert train_cli.main([*ARGV, "--out", str(out), "--quiet"]) == 0
-    return out
-
-
 def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path, train_until_killed):
     out = tmp_path / "run"
     killed_at = train_until_killed(ARGV, out)
+    # The killed holder's lock file stays, but the OS dropped its lock: the run resumes at once.
+    assert run_lock.lock_path(out).exists() and run_lock.holder(out) is None
     assert train_cli.main(["--resume", str(out), "--quiet"]) == 0
     name, arrays = final_arrays(out)
     want_name, want = final_arrays(uninterrupted)
@@ -96,6 +74,7 @@ def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path, train_un
     for k in want:
         np.testing.assert_array_equal(arrays[k], want[k], err_msg=k)
     assert metrics_without_wall(out) == metrics_without_wall(uninterrupted)
+    assert not run_lock.lock_path(out).exists()
 
 
 def older_copy(uninterrupted: Path, tmp_path: Path) -> tuple[Path, Path]:

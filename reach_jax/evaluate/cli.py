@@ -11,8 +11,9 @@ from pathlib import Path
 
 from reach_jax import evaluate
 from reach_jax.engine import distribute
-from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line
+from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line, printable
 from reach_jax.store import run_dir as run_dir_io
+from reach_jax.store import run_lock
 from reach_jax.store.checkpoint import CheckpointError
 
 
@@ -42,10 +43,14 @@ def main(argv=None) -> int:
             print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
             return 0
         distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
+        live = run_lock.holder(args.run_dir)
         run = run_dir_io.load(args.run_dir, args.checkpoint)
     except (UsageError, CheckpointError) as exc:
         sys.stderr.write(error_line(parser.prog, str(exc)))
         return EXIT_USAGE
+    if live is not None:
+        note = f"{args.run_dir} is still training ({live}); evaluating its checkpoint after chunk {run.chunk}"
+        sys.stderr.write(f"{parser.prog}: {printable(note)}\n")
     results = evaluate.evaluate_run(run)
     out = args.out or Path(args.run_dir) / evaluate.EVAL_DIR
     try:

@@ -27,6 +27,10 @@ class CheckpointError(OneLineError):
     """A checkpoint or run directory that cannot be used; the message names the file and field."""
 
 
+class CheckpointGone(CheckpointError):
+    """A listed checkpoint that was no longer there to read: a live run pruned it, which is no corruption."""
+
+
 def flatten(tree) -> dict[str, np.ndarray]:
     """Leaves of a pytree as NumPy arrays keyed by their path, as a checkpoint stores them."""
     leaves, _ = jax.tree_util.tree_flatten_with_path(tree)
@@ -84,8 +88,11 @@ def load(
     """
     path = Path(path)
     try:
+        # Once open, the file reads whole even if a live run prunes it meanwhile: it is removed, never rewritten.
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
+    except FileNotFoundError:
+        raise CheckpointGone(f"{path}: no longer there (pruned by the run that writes it?)") from None
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise CheckpointError(f"{path}: corrupt or truncated checkpoint ({exc})") from None
     if "__meta__" not in arrays:
@@ -118,3 +125,19 @@ def load(
             )
         restored.append(value)
     return jax.tree_util.tree_unflatten(treedef, restored), meta
+
+
+def load_newest(run_dir: Path, template, defaults: dict[str, np.ndarray] | None = None) -> tuple[object, dict, Path]:
+    """`load` of a run's newest checkpoint, and its path; raises CheckpointError when there is none.
+
+    A live run may prune the newest one listed before it is read; the listing is then taken again, and the
+    newest then on disk is read (a truly corrupt file still raises).
+    """
+    while True:
+        listed = list_checkpoints(run_dir)
+        if not listed:
+            raise CheckpointError(f"{Path(run_dir) / CHECKPOINT_DIR}: no checkpoints")
+        try:
+            return (*load(listed[-1], template, defaults), listed[-1])
+        except CheckpointGone:
+            continue

@@ -76,7 +76,8 @@ def read_metrics(run_dir: Path, up_to_chunk: float = math.inf) -> list[dict]:
     except (OSError, UnicodeDecodeError) as exc:
         raise CheckpointError(f"{path}: unreadable ({exc})") from None
     rows = []
-    for n, line in enumerate(text.splitlines(), 1):
+    # An unterminated last line is an append still in flight (or cut by a kill): of a chunk past every checkpoint.
+    for n, line in enumerate(text.split("\n")[:-1], 1):
         try:
             row = json.loads(line)
         except json.JSONDecodeError:
@@ -194,10 +195,6 @@ def load_batch(
     Raises CheckpointError when there is none, when the config stored in it disagrees with `cfg`, or when
     `speed` (the speed to continue with; None: not checked) has another setting that changes results.
     """
-    ckpts = checkpoint.list_checkpoints(run_dir)
-    if path is None and not ckpts:
-        raise CheckpointError(f"{Path(run_dir) / checkpoint.CHECKPOINT_DIR}: no checkpoints")
-    path = path or ckpts[-1]
     fresh = batch.init_batch(cfg)
     template = {"states": fresh.states, "hypers": fresh.hypers}
     # Hyperparameters added since the checkpoint was written take their values from the config, and so do the
@@ -208,7 +205,10 @@ def load_batch(
         for name, leaf in leaves.items()
         if name.startswith("['hypers']") or compat.is_added_state_field(name)
     }
-    tree, meta = checkpoint.load(path, template, defaults)
+    if path is None:
+        tree, meta, path = checkpoint.load_newest(run_dir, template, defaults)
+    else:
+        tree, meta = checkpoint.load(path, template, defaults)
     try:
         # Through from_dict, so a stored config of an older version reads as what the run trained with.
         stored = from_dict(meta["config"])

@@ -1,7 +1,8 @@
 """The command line `python -m reach_jax.train`: flags to a Config (`config.overlay`), then `train.run`.
 
 It parses its arguments, sets up the backend (devices, a multi-process run) and calls the library.
-Every user error prints one line, "prog: error: message", and exits 2 with nothing written.
+Every user error prints one line, "prog: error: message", and exits 2 with nothing written; so does a trainer on a
+run directory that another live process trains (`store.run_lock`).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from reach_jax.config.overlay import build_config, checked_config, with_settings
 from reach_jax.config.schema import DEFAULT_SPEED, MAX_HIDDEN_PAD, Speed
 from reach_jax.engine import distribute
 from reach_jax.errors import (
+    EXIT_INTERRUPTED,
     EXIT_IO,
     EXIT_NUMERICS,
     EXIT_PEER,
@@ -43,7 +45,9 @@ from reach_jax.errors import (
     whole_number,
 )
 from reach_jax.store import run_dir as run_dir_io
+from reach_jax.store import run_lock
 from reach_jax.store.checkpoint import CheckpointError
+from reach_jax.train import interrupt
 
 
 def _hidden_pad(text: str) -> int:
@@ -198,6 +202,7 @@ def validate(args: argparse.Namespace) -> Invocation:
         for flag in ("out", "config"):
             if getattr(args, flag) is not None:
                 raise UsageError(f"--{flag} cannot be combined with --resume (the run's config.json holds it)")
+        run_lock.check_free(args.resume)  # before reading: a live writer prunes checkpoints under a reader
         cfg = run_dir_io.read_config(args.resume)
         try:
             asked = checked_config(with_settings(to_dict(cfg), args))
@@ -213,6 +218,7 @@ def validate(args: argparse.Namespace) -> Invocation:
     existing = _first_existing(run_dir)
     if not existing.is_dir():
         raise UsageError(f"--out {run_dir}: {existing} is a file, not a directory")
+    run_lock.check_free(run_dir)
     if run_dir_io.holds_run(run_dir):
         raise UsageError(f"--out {run_dir} already holds a run; use --resume {run_dir}")
     try:
@@ -265,7 +271,7 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
     """Validate, then train; returns the exit status, after printing the one-line error of a failure."""
     try:
         inv, refused = validate(args), None
-    except (UsageError, CheckpointError) as exc:
+    except (UsageError, CheckpointError, run_lock.RunLockedError) as exc:
         inv, refused = None, exc
     try:
         if jax.distributed.is_initialized():
@@ -275,6 +281,13 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
             sys.stderr.write(error_line(prog, str(refused)))
             return EXIT_USAGE
         train.run(inv.prepared, progress=not inv.quiet)
+    except run_lock.RunLockedError as exc:  # another writer took the lock after this one validated
+        sys.stderr.write(error_line(prog, str(exc)))
+        return EXIT_USAGE
+    except interrupt.Interrupted as exc:
+        if jax.process_index() == 0:
+            print(f"{prog}: {exc}, its checkpoint written; resume with: {exc.resume_command()}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except train.NumericsError as exc:
         sys.stderr.write(error_line(prog, str(exc)))
         return EXIT_NUMERICS

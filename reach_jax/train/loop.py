@@ -4,6 +4,7 @@ Units: trials, steps (of cfg.arm.dt seconds), seconds."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import time
 from collections.abc import Iterator
@@ -17,7 +18,8 @@ from reach_jax.config import Config
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
 from reach_jax.engine import batch, distribute
 from reach_jax.engine.chunk import make_chunk
-from reach_jax.store import checkpoint
+from reach_jax.store import checkpoint, run_lock
+from reach_jax.train import interrupt
 from reach_jax.train.core import Finished, NumericsError, chunk_members, finite_learners, merge_members
 from reach_jax.train.metrics import metrics_rows, trial_records
 from reach_jax.train.prepare import Prepared, begin, prepare
@@ -49,16 +51,18 @@ def numerics_error(ok: np.ndarray, prep: Prepared, chunk: int) -> NumericsError:
     )
 
 
-def chunks(prep: Prepared, group: batch.Batch, devices=None) -> Iterator[Finished]:
+def chunks(prep: Prepared, group: batch.Batch, devices=None, stop: interrupt.Stop | None = None) -> Iterator[Finished]:
     """The run's compiled chunks from `group` until every learner has its trials, each once it has run.
 
     Each is yielded after the next one is dispatched, so the host's work on it overlaps the devices' work.
-    Raises NumericsError, before anything of that chunk is yielded, when a learner goes non-finite.
+    Raises NumericsError, before anything of that chunk is yielded, when a learner goes non-finite. Once `stop`
+    has caught a signal no chunk is dispatched; the one in flight is yielded, then Interrupted is raised.
     """
+    stop = interrupt.Stop() if stop is None else stop
     budget = prep.cfg.train.trials
     run_chunk = make_chunk(prep.cfg, prep.cfg.train.chunk_steps, devices, prep.speed)
     start = functools.partial(dispatch, run_chunk, group, budget=jnp.asarray(budget, jnp.int32))
-    states, index, running = jax.device_get(group.states), prep.chunk, None
+    states, index, running, asked = jax.device_get(group.states), prep.chunk, None, None
     members = chunk_members(np.asarray(states.env.trials), budget)
     if len(members):
         whole = len(members) == len(np.asarray(states.env.trials))
@@ -67,20 +71,24 @@ def chunks(prep: Prepared, group: batch.Batch, devices=None) -> Iterator[Finishe
         # The chunk's learners on this process (an all-gather across hosts with --multihost), copied to the host,
         # put back among the rest; learners outside the chunk ended no trial in it.
         (finished, log), running = running, None
+        interrupt.wait_ready((finished, log))
         states = merge_members(states, members, jax.device_get(distribute.to_host(finished)))
         records = None if log is None else trial_records(distribute.to_host(log), members, index + 1)
         ran, index = len(members), index + 1
         ok = finite_learners(states)
         following = chunk_members(np.asarray(states.env.trials), budget)
+        asked = stop.anywhere()
         # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk;
-        # the devices already hold its learners unless the batch shrinks.
-        if ok.all() and len(following):
+        # the devices already hold its learners unless the batch shrinks. After a stop signal, dispatch none.
+        if ok.all() and len(following) and asked is None:
             reuse = finished if np.array_equal(following, members) else None
             members = following
             running = start(states, members, device_states=reuse)
         if not ok.all():
             raise numerics_error(ok, prep, index)
         yield Finished(index, states, records, ran)
+    if asked is not None and len(chunk_members(np.asarray(states.env.trials), budget)):
+        raise interrupt.Interrupted(asked, prep.run_dir, index)
 
 
 def run(
@@ -99,6 +107,9 @@ def run(
     run_dir and draws the bar; resuming, every process reads the newest checkpoint, so run_dir must be shared.
     Raises NumericsError if a learner goes non-finite; the last good checkpoint stays on disk. A resume under
     another `speed.sparse_layer1` than the run's is refused (CheckpointError): it would change the results.
+    The writing process holds run_dir's lock throughout (`run_lock`; RunLockedError when another live process
+    does). The first SIGTERM or SIGINT ends the run after the chunk in flight, its checkpoint written, with
+    `interrupt.Interrupted`; a second ends the process at once.
 
     Args:
       cfg: the whole config (`config.Config`; `config.from_dict` builds one from JSON data), or a run that
@@ -113,19 +124,26 @@ def run(
     if isinstance(cfg, Prepared) and (run_dir is not None or resume or speed != DEFAULT_SPEED):
         raise TypeError("a prepared run carries its run_dir, resume and speed")
     prep = cfg if isinstance(cfg, Prepared) else prepare(cfg, run_dir, resume=resume, speed=speed)
-    group = begin(prep)
-    table = batch.learner_table(prep.cfg.train)
-    sinks: list[Sink] = []
-    if jax.process_index() == 0:  # one writer when several processes share the run directory
-        sinks = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
-        if progress:
-            n_devices = len(devices if devices is not None else jax.devices())
-            sinks.append(ProgressSink(prep.cfg.train.trials, len(table), n_devices, stream))
-    started = time.monotonic()
-    for done in chunks(prep, group, devices):
-        rows = metrics_rows(done.states, group.hypers, table, done.index, time.monotonic() - started, prep.cfg)
+    writer = jax.process_index() == 0  # one writer when several processes share the run directory
+    with run_lock.hold(prep.run_dir) if writer else contextlib.nullcontext(), interrupt.catch() as stop:
+        group = begin(prep)
+        table = batch.learner_table(prep.cfg.train)
+        sinks: list[Sink] = []
+        if writer:
+            sinks = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
+            if progress:
+                n_devices = len(devices if devices is not None else jax.devices())
+                sinks.append(ProgressSink(prep.cfg.train.trials, len(table), n_devices, stream))
+        started = time.monotonic()
+        try:
+            for done in chunks(prep, group, devices, stop):
+                rows = metrics_rows(done.states, group.hypers, table, done.index, time.monotonic() - started, prep.cfg)
+                for sink in sinks:
+                    sink.chunk(done, rows)
+        except interrupt.Interrupted:
+            for sink in sinks:
+                sink.stop()
+            raise
         for sink in sinks:
-            sink.chunk(done, rows)
-    for sink in sinks:
-        sink.close()
+            sink.close()
     return prep.run_dir

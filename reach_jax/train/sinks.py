@@ -24,6 +24,9 @@ class Sink:
     def close(self) -> None:
         """The last chunk has run."""
 
+    def stop(self) -> None:
+        """The run stops on a signal before its end (`interrupt`), after its last chunk was taken."""
+
 
 class MetricsSink(Sink):
     """Appends each chunk's metrics rows and per-trial log to the run directory."""
@@ -67,4 +70,8 @@ class ProgressSink(Sink):
     def close(self) -> None:
         """Draw the bar full and end its line."""
         self.bar.update(self.total, "done", force=True)
+        self.bar.close()
+
+    def stop(self) -> None:
+        """End the bar's line as it stands, so that what is printed next starts on a line of its own."""
         self.bar.close()
