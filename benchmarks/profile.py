@@ -75,7 +75,7 @@ def parts(cfg):
         cur = s.env.curriculum
         scale = exploration.value_scale(hyper, 0.0, cur.full_at, curriculum.shortfall(cur, cfg), s.env.trial.t)
         carried, fresh = exploration.noise(unit, hyper, s.env.trials, cur.full_at, scale, unit)
-        params = env.EnvParams(plan=plan, drift_neutral_early=hyper.drift_neutral_early > 0)
+        params = env.env_params(plan, hyper)
         new, _ = env.step(s.env, network.torque(carried, fresh, cfg), draws_, params, cfg)
         return s.replace(env=new)
 

@@ -49,6 +49,9 @@ def test_fields_that_the_first_layout_lacks_are_the_ones_a_fresh_batch_fills():
     assert compat.is_added_state_field("['states'].env.block.index")
     assert compat.is_added_state_field("['states'].agent.pending_learning")
     assert compat.is_added_state_field("['states'].agent.pending.gain")
+    assert compat.is_added_state_field("['states'].env.curriculum.failure")
+    assert compat.is_added_state_field("['states'].counters.stats.start_value")
+    assert not compat.is_added_state_field("['states'].counters.stats.goals")
     assert not compat.is_added_state_field("['states'].env.trial.arm")
     assert not compat.is_added_state_field("['states'].agent.params['params']['Dense_0']['bias']")
 
@@ -90,12 +93,23 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4 or 5, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5 or 6, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
 
 
+LEVERS_6 = ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")  # hyperparameters of version 6
+
+
+def _as_version_5(stored: dict) -> dict:
+    """A version-6 config dict without the fields that version 6 added."""
+    for name in LEVERS_6:
+        del stored["learner"][name], stored["train"][f"{name}_grid"]
+    del stored["task"]["drift_gate_start"], stored["train"]["saturated_output"]
+    return stored
+
+
 def test_versions_2_and_3_gain_the_fields_added_since_at_the_values_that_keep_their_runs():
-    stored = {**to_dict(Config(learner=LearnerConfig(noise_value_ratio=0.5))), "version": 2}
+    stored = _as_version_5({**to_dict(Config(learner=LearnerConfig(noise_value_ratio=0.5))), "version": 2})
     for name in ("noise_value_gate", "noise_value_steps", "actor_gain_power"):
         del stored["learner"][name], stored["train"][f"{name}_grid"]
     cfg = from_dict(stored)
@@ -103,12 +117,25 @@ def test_versions_2_and_3_gain_the_fields_added_since_at_the_values_that_keep_th
     assert cfg.learner.noise_value_steps == 0 and cfg.train.noise_value_steps_grid == ()
     assert cfg.learner.actor_gain_power == 0.0 and cfg.train.actor_gain_power_grid == ()
     assert cfg == Config(learner=LearnerConfig(noise_value_ratio=0.5))
-    stored = {**to_dict(Config(learner=LearnerConfig(noise_value_gate=0.1))), "version": 3}
+    stored = _as_version_5({**to_dict(Config(learner=LearnerConfig(noise_value_gate=0.1))), "version": 3})
     for name in ("noise_value_steps", "actor_gain_power"):
         del stored["learner"][name], stored["train"][f"{name}_grid"]
     assert from_dict(stored) == Config(learner=LearnerConfig(noise_value_gate=0.1))
     del stored["learner"]["noise_corr"]  # version 3 stored every field of its own
     with pytest.raises(ValueError, match="^learner.noise_corr: missing"):
+        from_dict(stored)
+
+
+def test_version_5_gains_the_drift_gate_n_max_rule_and_actor_gain_switched_off():
+    stored = _as_version_5({**to_dict(Config(learner=LearnerConfig(actor_gain_power=2.0))), "version": 5})
+    cfg = from_dict(stored)
+    assert (cfg.learner.drift_gate, cfg.learner.n_max_clean, cfg.learner.actor_signal_gain) == (0.0, 0.0, 1.0)
+    assert cfg.learner.drift_gate_trials == 300 and cfg.task.drift_gate_start == 1.0
+    assert cfg.train.saturated_output == 0.45 and all(getattr(cfg.train, f"{n}_grid") == () for n in LEVERS_6)
+    assert cfg == Config(learner=LearnerConfig(actor_gain_power=2.0))
+    stored = {**to_dict(Config()), "version": 6}
+    del stored["learner"]["drift_gate"]  # version 6 stores them
+    with pytest.raises(ValueError, match="^learner.drift_gate: missing"):
         from_dict(stored)
 
 

@@ -74,6 +74,11 @@ def test_learning_curves_draw_one_line_per_learner_in_every_panel():
             "mean_trial_s": 1.0 + c,
             "distance_m": 0.064 + 0.001 * c,
             "exploration": 0.2 - 0.05 * c,
+            "clean_margin": 0.2 * c - 0.5,
+            "failure": 1.0 - 0.1 * c,
+            "saturated_rate": 0.01 * c,
+            "start_value": -0.1 + 0.05 * c,
+            **{f"w{k}_norm": 10.0 / k + c for k in (1, 2, 3)},
         }
         for c in range(3)
         for i, cond in enumerate(("none", "viscous"))

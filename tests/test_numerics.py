@@ -18,9 +18,9 @@ import pytest
 from conftest import default_hyper
 
 from reach_jax import env
-from reach_jax.agent import learner, network
+from reach_jax.agent import exploration, learner, network
 from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_partial
-from reach_jax.engine import random_stream
+from reach_jax.engine import random_stream, rollout
 from reach_jax.engine.learner_state import init_learner
 from reach_jax.env import curriculum, protocol, task
 from reach_jax.physics import arm, encoding, fields, sensor
@@ -518,6 +518,109 @@ def test_trial_placement_and_drift_match_oracle():
         assert bool(moved) == want_moved
 
 
+def test_drift_gate_and_failure_share_match_oracle():
+    rate = 1.0 / 300
+    h = {"drift_gate": 0.0, "drift_gate_trials": 300}
+    after = jax.jit(lambda f, g, d: curriculum.failure_after(f, g, d, jnp.asarray(rate)))
+    for failure, goal, drifted in itertools.product((0.0, 0.3, 1.0), (True, False), (True, False)):
+        got = float(after(jnp.asarray(failure), jnp.asarray(goal), jnp.asarray(drifted)))
+        assert got == pytest.approx(reference.update_failure(failure, goal, drifted, h), abs=1e-15)
+    # Only a success without drift lowers the share.
+    assert reference.update_failure(0.3, True, False, h) < 0.3 < reference.update_failure(0.3, True, True, h)
+    is_open = jax.jit(lambda f, g: curriculum.drift_open(curriculum.initial(CFG).replace(failure=f), g))
+    for failure, gate in itertools.product((0.0, 0.2, 0.5, 1.0), (0.0, 0.2, 0.7, 1.0)):
+        want = reference.drift_open(failure, {**h, "drift_gate": gate})
+        assert bool(is_open(jnp.asarray(failure), jnp.asarray(gate))) == want
+        assert want == (gate == 0.0 or failure > gate)
+
+
+def _still_arm_trial(gate: float, failure: float):
+    """Per step of cap + 1 (goal, cap, the trial drifted before, the curriculum after) of an arm at rest 5 cm from
+    its target under torque 0, from failure share `failure`."""
+    plan = protocol.make_plan("none", CFG)
+    draws = task.draw_trial(jax.random.PRNGKey(0), CFG)
+    state = env.reset(draws, plan, CFG)
+    hand = np.array([-0.05, 0.37])
+    start = np.concatenate([reference.inverse_kinematics(hand, CFG.arm), np.zeros(2)])
+    trial = env.start_trial(jnp.asarray(start), jnp.asarray(hand + [0.05, 0.0]), jnp.zeros(2))
+    state = state.replace(trial=trial, curriculum=state.curriculum.replace(failure=jnp.asarray(failure)))
+    params = env.EnvParams(plan, jnp.asarray(False), jnp.asarray(gate), jnp.asarray(1.0 / 300))
+    cap = round(CFG.task.max_trial_time / CFG.arm.dt)
+
+    def body(s, _):
+        new, outcome = env.step(s, jnp.zeros(2), draws, params, CFG)
+        return new, (outcome.goal, outcome.cap, s.trial.drifted, new.curriculum)
+
+    _, per_step = jax.jit(lambda s: jax.lax.scan(body, s, None, length=cap + 1))(state)
+    return jax.tree.map(np.asarray, per_step)
+
+
+@pytest.mark.parametrize("gate", [0.0, 0.1, 0.5])
+def test_a_closed_drift_gate_runs_a_long_trial_to_its_cap(gate):
+    """Failure share 0.2: gate 0 (off) and 0.1 let the target drift to the resting hand, 0.5 keeps it away."""
+    goal, capped, drifted, cur = _still_arm_trial(gate, 0.2)
+    cap = round(CFG.task.max_trial_time / CFG.arm.dt)
+    first_end = int(np.argmax(goal | capped))
+    lo = reference.curriculum_bounds(CFG)[0]
+    if gate == 0.5:
+        assert first_end == cap - 1 and capped[first_end] and not drifted.any()  # the cap, without drift
+    else:
+        onset = round(CFG.task.drift_after / CFG.arm.dt)
+        assert onset < first_end < cap - 1 and goal[first_end] and drifted[first_end]  # a drift-aided goal
+    # Either way a failure for the curriculum (at its floor the distance stays) and for the gate's share.
+    assert cur.distance[first_end] == pytest.approx(lo)
+    assert cur.failure[first_end - 1] == 0.2 and cur.failure[first_end] == pytest.approx(0.2 + (1.0 - 0.2) / 300)
+
+
+def _n_max_after_success(drifted: bool, clean: float) -> float:
+    """N_max after a learner at rest on its target ends a 61-step trial at the goal (noise 0, actor at 0)."""
+    plan = protocol.make_plan("none", CFG)
+    state = init_learner(jax.random.PRNGKey(0), plan, CFG)
+    params = _float64_params(state.agent.params)
+    hand = arm.hand_position(state.env.trial.arm[:2], CFG.arm)
+    trial = state.env.trial.replace(target=hand, t=jnp.asarray(60, jnp.int32), drifted=jnp.asarray(drifted))
+    state = state.replace(env=state.env.replace(trial=trial), agent=state.agent.replace(params=params))
+    h = default_hyper(CFG)._replace(noise=jnp.asarray(0.0), n_max_clean=jnp.asarray(clean))
+    u = random_stream.step_uniforms(state.key, 0, 1, CFG)[0]
+    new, info = jax.jit(lambda s, h: rollout.learner_step(s, u, plan, h, CFG))(state, h)
+    assert bool(info.goal)
+    return float(new.agent.n_max)
+
+
+def test_n_max_from_clean_successes_skips_a_drift_aided_one():
+    decayed = reference.update_n_max(CFG.learner.n_max_init, 61, CFG.learner.lam)  # 61 < lam N_max: lam N_max
+    assert _n_max_after_success(drifted=True, clean=0.0) == pytest.approx(decayed)  # eq. 3 on every success
+    assert _n_max_after_success(drifted=True, clean=1.0) == CFG.learner.n_max_init  # a drift-aided one: unchanged
+    assert _n_max_after_success(drifted=False, clean=1.0) == pytest.approx(decayed)  # a clean one counts
+
+
+def test_actor_signal_gain_halves_the_actors_step_and_leaves_the_critics():
+    """g = 0.5: the output layer's actor columns move half as far, its critic column as far; the oracle agrees."""
+    params = _random_params(15)
+    rng = _rng(16)
+    pend = _pendings(rng, 125)["regular"]
+    pend["out"] = np.asarray(network.apply(params, jnp.asarray(pend["x"]), NET_CFG))  # acted with these weights
+    x_now, n_max, lr = rng.uniform(0, 1, 125), 30.0, 0.7
+    h = default_hyper(CFG)
+    steps = {}
+    for g in (1.0, 0.5):
+        gain = exploration.actor_gain(h._replace(actor_signal_gain=jnp.asarray(g)), jnp.asarray(1.0))
+        jax_pend = learner.Pending(**{k: jnp.asarray(v) for k, v in pend.items()}, gain=gain)
+        new, _, _, _ = _TS_STEP(params, jnp.asarray(x_now), jax_pend, jnp.asarray(n_max), jnp.asarray(lr))
+        ref_gain = reference.actor_gain(1.0, {**h._asdict(), "actor_signal_gain": g, "actor_gain_power": 0.0})
+        layers, _, _ = reference.ts_update(
+            reference.layers_from_flax(params), x_now, reference.Pending(**pend, gain=ref_gain), n_max, lr, NET_CFG
+        )
+        chex.assert_trees_all_close(
+            jax.tree.map(np.asarray, new), reference.layers_to_flax(layers), rtol=RTOL, atol=ATOL
+        )
+        steps[g] = np.asarray(network.dense_layers(new)[-1][0] - network.dense_layers(params)[-1][0])
+    assert np.abs(steps[1.0]).min() > 1e-6  # every output weight moved
+    # Steps are differences of O(1) weights: each carries ~1e-16 of rounding.
+    np.testing.assert_allclose(steps[0.5][:, 0], steps[1.0][:, 0], rtol=0, atol=1e-14)  # the critic's step
+    np.testing.assert_allclose(steps[0.5][:, 1:], 0.5 * steps[1.0][:, 1:], rtol=0, atol=1e-14)  # the actor's, halved
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # 200-step learner rollout under the same noise
 # ---------------------------------------------------------------------------------------------------------------
@@ -564,16 +667,34 @@ EXPLORATION_FORMS = {
 }
 
 
-@pytest.mark.parametrize("forms", [{}, EXPLORATION_FORMS], ids=["eq2-white-noise", "exploration-forms"])
-def test_rollout_replays_in_oracle(forms):
-    cfg = dataclasses.replace(ROLLOUT_CFG, learner=dataclasses.replace(ROLLOUT_CFG.learner, **forms))
+# The levers of the drift and the actor's step (model §5): a drift gate whose failure share moves fast (time
+# constant 2 trials) from a start below the gate's 0.6, so that it is closed in the first trial, opens after
+# failures and closes again after a clean success; N_max from clean successes only; the actor's signal at half its
+# size. An early, fast drift (from 0.4 s, 4 mm a step) makes drift-aided successes within 200 steps; seeds 4 and
+# 5 then also end trials at each of the goal, a limit and the cap.
+LEVERS = {"drift_gate": 0.6, "drift_gate_trials": 2, "n_max_clean": 1.0, "actor_signal_gain": 0.5}
+LEVERS_TASK = {"drift_gate_start": 0.5, "drift_after": 0.4, "drift_per_step": 0.004}
+
+
+@pytest.mark.parametrize(
+    ("forms", "task_forms", "seeds"),
+    [({}, {}, ROLLOUT_SEEDS), (EXPLORATION_FORMS, {}, ROLLOUT_SEEDS), (LEVERS, LEVERS_TASK, (4, 5))],
+    ids=["eq2-white-noise", "exploration-forms", "drift-and-actor-levers"],
+)
+def test_rollout_replays_in_oracle(forms, task_forms, seeds):
+    learner_cfg = dataclasses.replace(ROLLOUT_CFG.learner, **forms)
+    cfg = dataclasses.replace(
+        ROLLOUT_CFG, learner=learner_cfg, task=dataclasses.replace(ROLLOUT_CFG.task, **task_forms)
+    )
     plan = protocol.make_plan("replay", cfg)
     ref_plan = reference.make_plan("replay", cfg)
     hyper = default_hyper(cfg)
     h = {name: float(v) for name, v in hyper._asdict().items()}
     trace = make_trace(cfg, ROLLOUT_STEPS)  # compiled once, run for each seed
     seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0, "catch": 0, "frozen": 0}
-    for seed in ROLLOUT_SEEDS:
+    gated = {"closed past the drift onset": 0, "drift-aided goal": 0}
+    onset = round(cfg.task.drift_after / cfg.arm.dt)
+    for seed in seeds:
         state = init_learner(jax.random.PRNGKey(seed), plan, cfg)
         state = state.replace(agent=state.agent.replace(params=_float64_params(state.agent.params)))
         final, infos = trace(state, plan, hyper)
@@ -584,8 +705,10 @@ def test_rollout_replays_in_oracle(forms):
         recs = []
         for i in range(ROLLOUT_STEPS):
             draws = reference.Draws(*(a[i] for a in infos.draws))
-            was_drifted, trials = lrn.drifted, lrn.trials
+            was_drifted, trials, t, open_ = lrn.drifted, lrn.trials, lrn.t, reference.drift_open(lrn.failure, h)
             lrn, rec = reference.learner_step(lrn, ref_plan, h, cfg.learner.noise, units[i], draws, cfg)
+            gated["closed past the drift onset"] += (not open_) and t + 1 == onset
+            gated["drift-aided goal"] += rec.goal and was_drifted
             seen["quiet"] = seen.get("quiet", 0) + (not np.any(lrn.pending.rnd))
             seen["drift"] += (not was_drifted) and lrn.drifted
             if lrn.trials > trials:
@@ -616,12 +739,16 @@ def test_rollout_replays_in_oracle(forms):
         np.testing.assert_allclose(np.asarray(trial.target), lrn.target, rtol=0, atol=1e-9)
         assert float(final.agent.n_max) == pytest.approx(lrn.n_max, abs=1e-9)
         assert float(final.env.curriculum.distance) == pytest.approx(lrn.distance, abs=1e-12)
+        assert float(final.env.curriculum.failure) == pytest.approx(lrn.failure, abs=1e-12)
         assert int(final.env.trials) == lrn.trials and int(trial.t) == lrn.t and bool(trial.drifted) == lrn.drifted
 
     # The reset path (and each way of ending a trial, and the drift) was exercised; quiet steps only where asked.
     quiet = seen.pop("quiet")
     assert all(v > 0 for v in seen.values()), seen
-    assert (quiet > 0) == bool(forms), quiet
+    assert (quiet > 0) == (forms.get("quiet_every", 0) > 0), quiet
+    # With the levers on, the gate closed in a trial that ran past the drift onset, and a drift-aided success
+    # (which N_max then skipped) was replayed.
+    assert all(v > 0 for v in gated.values()) == (forms is LEVERS), gated
 
 
 def test_run_reference_runs():

@@ -27,7 +27,7 @@ from reach_jax.config import (
     to_dict,
 )
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
-from reach_jax.engine import batch, random_stream, rollout
+from reach_jax.engine import batch, learner_state, random_stream, rollout
 from reach_jax.engine.chunk import make_chunk, narrow_hidden, widen_hidden
 from reach_jax.engine.learner_state import init_learner
 from reach_jax.env import curriculum, protocol, task
@@ -159,6 +159,20 @@ def test_trials_end_and_reset_inside_the_scan():
         assert int(stats.goals + stats.outs + stats.caps) == done.sum()
         x = np.asarray(info.x)
         first = np.flatnonzero(done[:-1]) + 1
+        # The mechanism's counters (model §5): every step, the actor's outputs near f's bounds, the critic at each
+        # trial's first step; the drift gate is off, so every trial ran with it open.
+        out, starts = np.asarray(info.out), np.concatenate([[0], first])
+        assert int(stats.steps) == 60 and int(stats.starts) == len(starts)
+        assert int(stats.saturated) == np.sum(np.abs(out[:, 1:]) > cfg.train.saturated_output)
+        assert float(stats.start_value) == pytest.approx(out[starts, 0].sum(), rel=1e-5, abs=1e-6)
+        assert int(stats.gate_open) == int(stats.trials) and int(stats.clean_goals) <= int(stats.goals)
+        columns = learner_state.mechanism_columns(jax.tree.map(lambda a: np.asarray(a)[None], final), cfg)
+        clean, goals, outs, trials = (int(getattr(stats, k)) for k in ("clean_goals", "goals", "outs", "trials"))
+        assert columns["clean_margin"] == [pytest.approx((clean - (goals - clean) - outs) / trials)]
+        assert columns["start_value"] == [pytest.approx(float(stats.start_value) / len(starts))]
+        assert columns["failure"] == [float(final.env.curriculum.failure)]
+        kernel = np.asarray(final.agent.params["params"]["Dense_0"]["kernel"])
+        assert columns["w1_norm"] == [pytest.approx(np.sqrt(np.sum(kernel.astype(float) ** 2)), rel=1e-6)]
         if name == "random_nopast":
             assert np.all(x[:, n_now:] == 0)
             continue

@@ -8,7 +8,8 @@ the noise is b (2u - 1) exactly as before they existed:
   field, relaxed while the curriculum falls short of the whole field or once a trial runs long (`value_scale`);
 - trials without noise, the correlated share included (`quiet`);
 - AR(1) noise correlated from step to step, with the stationary spread of the white noise (`noise`);
-- the actor's signal scaled up where the value scaling shrinks the noise (`actor_gain`), a departure from eq. 2.
+- the actor's signal scaled up where the value scaling shrinks the noise, and by a constant actor-only gain g
+  (`actor_gain`), departures from eq. 2.
 """
 
 from __future__ import annotations
@@ -62,13 +63,14 @@ def value_scale(h: Hyper, p: jax.Array, full_at: jax.Array, shortfall: jax.Array
 
 
 def actor_gain(h: Hyper, scale: jax.Array) -> jax.Array:
-    """() factor on the actor's signal of a step explored at `value_scale` factor `scale`: scale^-actor_gain_power.
+    """() factor on the actor's signal of a step explored at `value_scale` factor `scale`: g scale^-actor_gain_power.
 
     The expected actor step E[rnd dp] grows with the bound squared, so power 2 keeps the whole bound's expected step
-    where the value scaling shrinks the noise, and power 1 the spread of the step's noise (model §5). 1 at power 0.
+    where the value scaling shrinks the noise, and power 1 the spread of the step's noise (model §5). g is the
+    constant actor-only gain `actor_signal_gain`, which leaves the critic's step as it is. 1 at power 0 and g = 1.
     """
     on = (h.actor_gain_power > 0) & (scale > 0)
-    return jnp.where(on, jnp.where(on, scale, 1.0) ** -h.actor_gain_power, 1.0)
+    return h.actor_signal_gain * jnp.where(on, jnp.where(on, scale, 1.0) ** -h.actor_gain_power, 1.0)
 
 
 def quiet(h: Hyper, trials: jax.Array) -> jax.Array:

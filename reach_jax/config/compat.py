@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -16,6 +16,14 @@ ADDED_CONFIG_FIELDS = {
     3: {"learner": {"noise_value_gate": 0.0}, "train": {"noise_value_gate_grid": []}},
     4: {"learner": {"noise_value_steps": 0}, "train": {"noise_value_steps_grid": []}},
     5: {"learner": {"actor_gain_power": 0.0}, "train": {"actor_gain_power_grid": []}},
+    6: {
+        "learner": {"actor_signal_gain": 1.0, "drift_gate": 0.0, "drift_gate_trials": 300, "n_max_clean": 0.0},
+        "task": {"drift_gate_start": 1.0},
+        "train": {
+            "saturated_output": 0.45,
+            **{f"{name}_grid": [] for name in ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")},
+        },
+    },
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
@@ -30,8 +38,12 @@ _V2_GROUPS = ("agent", "env", "curriculum", "counters")
 _V2_FLAT_RENAMED = {"block.index": "block", "block.learning": "learning", "block.catch": "catch"}
 # State fields that older checkpoints lack: a fresh batch fills them with what those runs trained with. Format-2
 # files of the first layout lack the run's own condition, block 0 and learning on (made before protocols); every
-# file before the actor's gain lacks its value 1 (`exploration.actor_gain`).
-ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "env.block", "agent.pending.gain")
+# file before the actor's gain lacks its value 1 (`exploration.actor_gain`); every file before the drift gate lacks
+# the recent failure share (its start value: those runs drifted in every trial) and the chunk counters added with it
+# (reset at each chunk).
+ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "env.block", "agent.pending.gain", "env.curriculum.failure")
+_ADDED_STATS = ("clean_goals", "gate_open", "steps", "saturated", "starts", "start_value")
+ADDED_STATE_FIELDS += tuple(f"counters.stats.{name}" for name in _ADDED_STATS)
 
 # The result-changing speed settings (`schema.SPEED_RESULT_FIELDS`) of checkpoints written before they were stored.
 SPEED_BEFORE_STORED = {"sparse_layer1": True}

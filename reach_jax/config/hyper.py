@@ -124,9 +124,38 @@ TABLE = (
         neutral=0.0,
     ),
     Hyperparameter(
+        "actor_signal_gain",
+        1.0,
+        "g: eq. 2's actor signal multiplied by it, the critic's left as it is; 1 = eq. 2 (departs from it, model §5)",
+        neutral=1.0,
+    ),
+    Hyperparameter(
         "drift_neutral_early",
         0.0,
         "1: a drift-aided success leaves the curriculum unchanged before the first full field too (model §5 choice)",
+        high=1.0,
+        neutral=0.0,
+    ),
+    Hyperparameter(
+        "drift_gate",
+        0.0,
+        "a trial's target drifts only while the learner's recent failure share exceeds it; 0 = off, every trial "
+        "drifts (the paper's 'often fails', model §5)",
+        high=1.0,
+        neutral=0.0,
+    ),
+    Hyperparameter(
+        "drift_gate_trials",
+        300,
+        "time constant of the recent failure share, an exponential mean over trials (model §5 choice)",
+        low_open=True,
+        integer=True,
+        neutral=300,
+    ),
+    Hyperparameter(
+        "n_max_clean",
+        0.0,
+        "1: eq. 3 takes only successes without drift into N_max (departs from eq. 3's every success, model §5)",
         high=1.0,
         neutral=0.0,
     ),

@@ -22,7 +22,7 @@ from reach_jax.config.tables import (
     ProtocolConfig,
 )
 
-CONFIG_VERSION = 5  # a stored config holds every field; versions 3-5 each added a field (`compat`)
+CONFIG_VERSION = 6  # a stored config holds every field; versions 3-6 each added fields (`compat`)
 
 
 @dataclass(frozen=True)
@@ -111,6 +111,7 @@ class TaskConfig:
     max_trial_time: float = 10.0  # safety cap on a learning trial [s] (model §5 choice)
     drift_neutral_when_full: bool = True  # once the field was first full, a drift-aided success leaves the
     # curriculum unchanged instead of shrinking it (model §11 choice, "drift-aided success")
+    drift_gate_start: float = 1.0  # recent failure share a fresh learner starts with: it fails (model §5 choice)
 
 
 @dataclass(frozen=True)
@@ -143,6 +144,7 @@ class TrainSettings:
     init_from: str = ""  # a run directory whose final networks start the learners (model §12); "" = fresh weights
     trial_log_every: int = 0  # log every n-th trial's movement to trials/ (model §12); 0 = no per-trial log
     direction_time: float = 0.1  # the logged initial direction is the hand's at this time into the trial [s] (choice)
+    saturated_output: float = 0.45  # metrics count an actor output |m| above it as saturated (model §5 choice)
 
 
 # The settings, then one sweep grid per entry of hyper.TABLE (<name>_grid): the values crossed with the other

@@ -97,8 +97,8 @@ def start_from(states: learner_state.LearnerState, source, source_table: list[tu
     """Fresh learner states that take the trained networks of another run (train.init_from, model §12).
 
     Learner (name, seed) takes the network of the source's learner with the same seed index in the condition of
-    its first block (the first such learner of a sweep): its weights, N_max and curriculum distance. Its trials,
-    steps, key and first trial stay its own.
+    its first block (the first such learner of a sweep): its weights, N_max, curriculum distance and recent failure
+    share (the drift gate's measure). Its trials, steps, key and first trial stay its own.
 
     Args:
       states: fresh states, learner axis first (`init_batch`).
@@ -111,6 +111,7 @@ def start_from(states: learner_state.LearnerState, source, source_table: list[tu
     cur = curriculum.Curriculum(
         distance=taken.env.curriculum.distance,
         full_at=jnp.where(taken.env.curriculum.full_at >= 0, 0, -1).astype(jnp.int32),
+        failure=taken.env.curriculum.failure,
     )
     return states.replace(
         agent=states.agent.replace(params=jax.tree.map(jnp.copy, taken.agent.params), n_max=taken.agent.n_max),

@@ -9,6 +9,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from flax import struct
 
 from reach_jax import env
@@ -19,7 +20,7 @@ from reach_jax.physics import encoding
 
 
 class Stats(NamedTuple):
-    """Counters of trials that ended since the last reset (one chunk)."""
+    """Counters of trials that ended and steps taken since the last reset (one chunk)."""
 
     trials: jax.Array  # () trials ended
     goals: jax.Array  # () ended at the goal
@@ -27,11 +28,18 @@ class Stats(NamedTuple):
     caps: jax.Array  # () ended at the safety cap
     trial_steps: jax.Array  # () summed length of the ended trials [steps]
     drifted: jax.Array  # () ended trials whose target drifted
+    clean_goals: jax.Array  # () ended at the goal without drift
+    gate_open: jax.Array  # () ended trials run with the drift gate open (`curriculum.drift_open`)
+    steps: jax.Array  # () steps taken
+    saturated: jax.Array  # () actor outputs beyond cfg.train.saturated_output, two per step
+    starts: jax.Array  # () steps that began a trial
+    start_value: jax.Array  # () summed critic value p at those steps (float)
 
 
 def zero_stats() -> Stats:
     """All counters at zero."""
-    return Stats(*(jnp.array(0, jnp.int32) for _ in Stats._fields))
+    counts = {name: jnp.array(0, jnp.int32) for name in Stats._fields}
+    return Stats(**{**counts, "start_value": jnp.zeros((), float)})  # strong-typed, as the chunk returns it
 
 
 @struct.dataclass
@@ -82,6 +90,36 @@ def init_learner(key: jax.Array, plan: protocol.Plan, cfg: Config) -> LearnerSta
         counters=Counters(steps=jnp.array(0, jnp.int32), stats=zero_stats()),
         trace=trial_log.start_trace(start, state.trial.target, cfg) if cfg.train.trial_log_every else None,
     )
+
+
+def mechanism_columns(states: LearnerState, cfg: Config) -> dict[str, list]:
+    """Per-learner chunk measures of the drift and learning mechanism (model §5), None where nothing was counted.
+
+    clean_rate: share of ended trials at the goal without drift; clean_margin: that share less the drift-aided
+    successes' and the outs'; gate_open_rate: share run with the drift gate open; failure: the gate's failure share
+    now; saturated_rate: share of actor outputs beyond cfg.train.saturated_output; start_value: mean critic value at
+    a trial's first step; w<i>_norm: Frobenius norm of layer i's kernel now.
+
+    Args:
+      states: every learner after the chunk, learner axis first (host arrays).
+      cfg: the run's config.
+    """
+    s = jax.tree.map(np.asarray, states.counters.stats)
+    trials, steps, starts = (np.maximum(x, 1) for x in (s.trials, s.steps, s.starts))
+    n_actor = cfg.network.n_out - 1
+    columns = {
+        "clean_rate": (s.clean_goals / trials, s.trials),
+        "clean_margin": ((2 * s.clean_goals - s.goals - s.outs) / trials, s.trials),
+        "gate_open_rate": (s.gate_open / trials, s.trials),
+        "saturated_rate": (s.saturated / (n_actor * steps), s.steps),
+        "start_value": (s.start_value / starts, s.starts),
+    }
+    out = {name: [float(v) if n else None for v, n in zip(*pair, strict=True)] for name, pair in columns.items()}
+    out["failure"] = [float(v) for v in np.asarray(states.env.curriculum.failure)]
+    for i, (kernel, _) in enumerate(network.dense_layers(states.agent.params), 1):
+        kernel = np.asarray(kernel)
+        out[f"w{i}_norm"] = [float(v) for v in np.linalg.norm(kernel.reshape(len(kernel), -1), axis=1)]
+    return out
 
 
 def without_params(state: LearnerState) -> LearnerState:

@@ -94,7 +94,7 @@ def learner_step(
     rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)  # carried in the pending step
     learns = agent.pending_learning if active is None else active & agent.pending_learning
     params, out, loss, u1, rnd, gain, tau = act(state, x, rows, unit, hyper, learns, cfg, speed)
-    params_env = env.EnvParams(plan=plan, drift_neutral_early=hyper.drift_neutral_early > 0)
+    params_env = env.env_params(plan, hyper)
     new_env, outcome = env.step(state.env, tau, draws, params_env, cfg)
     goal, out_of_range, done = outcome.goal, outcome.out_of_range, env.ended(outcome)
     reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)
@@ -102,12 +102,16 @@ def learner_step(
     pending = learner.Pending(
         x=x, out=out, rnd=rnd, valid=~outcome.cap, terminal=terminal, reward=reward, u1=u1, rows=rows, gain=gain
     )
-    n_max = jnp.where(goal, learner.update_n_max(agent.n_max, outcome.t, hyper.lam), agent.n_max)
+    # With hyper n_max_clean a drift-aided success leaves N_max as it is (eq. 3 on clean successes only).
+    counted = goal & ~((hyper.n_max_clean > 0) & trial.drifted)
+    n_max = jnp.where(counted, learner.update_n_max(agent.n_max, outcome.t, hyper.lam), agent.n_max)
     trace, record = trace_step(state, new_env, outcome, cfg)
     new = state.replace(
         agent=AgentState(params=params, pending=pending, pending_learning=state.env.block.learning, n_max=n_max),
         env=new_env,
-        counters=state.counters.replace(steps=state.counters.steps + 1, stats=count(state, outcome)),
+        counters=state.counters.replace(
+            steps=state.counters.steps + 1, stats=count(state, outcome, out, params_env.drift_gate, cfg)
+        ),
         trace=trace,
     )
     info = StepInfo(
@@ -127,16 +131,23 @@ def learner_step(
     return new, info
 
 
-def count(state: LearnerState, outcome: env.TrialStatus) -> Stats:
-    """The chunk's trial counters after a step with this outcome."""
-    s, done = state.counters.stats, env.ended(outcome)
+def count(state: LearnerState, outcome: env.TrialStatus, out: jax.Array, gate: jax.Array, cfg: Config) -> Stats:
+    """The chunk's counters after a step with this outcome, network outputs `out` (3,) and hyper `drift_gate`."""
+    s, done, trial = state.counters.stats, env.ended(outcome), state.env.trial
+    first = trial.t == 0
     return Stats(
         trials=s.trials + done,
         goals=s.goals + outcome.goal,
         outs=s.outs + outcome.out_of_range,
         caps=s.caps + outcome.cap,
         trial_steps=s.trial_steps + jnp.where(done, outcome.t, 0),
-        drifted=s.drifted + (done & state.env.trial.drifted),
+        drifted=s.drifted + (done & trial.drifted),
+        clean_goals=s.clean_goals + (outcome.goal & ~trial.drifted),
+        gate_open=s.gate_open + (done & curriculum.drift_open(state.env.curriculum, gate)),
+        steps=s.steps + 1,
+        saturated=s.saturated + jnp.sum(jnp.abs(out[1:]) > cfg.train.saturated_output, dtype=jnp.int32),
+        starts=s.starts + first,
+        start_value=s.start_value + jnp.where(first, out[0], 0.0),
     )
 
 

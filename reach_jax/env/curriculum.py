@@ -1,6 +1,8 @@
-"""The curriculum of start-target distances: its state, its bounds and its staircase (model §5).
+"""The curriculum of start-target distances and the drift gate: their state, bounds and rules (model §5).
 
 Units: distances [m], counts in trials. The distance d bounds the start-target offset in each axis (an L-inf box).
+The drift gate follows the learner's recent failure share, an exponential mean of the trials that ended without
+a clean success (one that needed no drift).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ class Curriculum:
 
     distance: jax.Array  # () curriculum distance [m]
     full_at: jax.Array  # () trials ended when the distance first reached its maximum; -1 before
+    failure: jax.Array  # () recent share of trials that ended without a clean success, in [0, 1]
 
 
 def bounds(cfg: Config) -> tuple[float, float]:
@@ -33,7 +36,19 @@ def shortfall(cur: Curriculum, cfg: Config) -> jax.Array:
 def initial(cfg: Config) -> Curriculum:
     """The staircase before the first trial: the initial distance, full from the start only if that spans the field."""
     distance, full = (jnp.asarray(b) for b in bounds(cfg))
-    return Curriculum(distance=distance, full_at=jnp.where(distance >= full, 0, -1).astype(jnp.int32))
+    full_at = jnp.where(distance >= full, 0, -1).astype(jnp.int32)
+    return Curriculum(distance=distance, full_at=full_at, failure=jnp.asarray(cfg.task.drift_gate_start, float))
+
+
+def drift_open(cur: Curriculum, gate: jax.Array) -> jax.Array:
+    """() bool: the trial's target may drift; with hyper `drift_gate` > 0 only while the failure share exceeds it."""
+    return (gate <= 0) | (cur.failure > gate)
+
+
+def failure_after(failure: jax.Array, goal: jax.Array, drifted: jax.Array, rate: jax.Array) -> jax.Array:
+    """The recent failure share after a trial: moved by `rate` (1 / hyper `drift_gate_trials`) toward 0 or 1."""
+    failed = jnp.where(goal & ~drifted, 0.0, 1.0)
+    return failure + rate * (failed - failure)
 
 
 def staircase(
@@ -66,9 +81,17 @@ def staircase(
 
 
 def after_step(
-    cur: Curriculum, ended: jax.Array, goal: jax.Array, drifted: jax.Array, trials: jax.Array, cfg: Config, early
+    cur: Curriculum,
+    ended: jax.Array,
+    goal: jax.Array,
+    drifted: jax.Array,
+    trials: jax.Array,
+    cfg: Config,
+    early,
+    rate: jax.Array,
 ) -> Curriculum:
-    """The staircase after a step: moved if the step ended a trial, with the trial count when it first got full.
+    """The staircase after a step: moved if the step ended a trial, with the trial count when it first got full,
+    and the failure share.
 
     Args:
       cur: the staircase before the step.
@@ -78,8 +101,10 @@ def after_step(
       trials: () int32 trials ended before this step.
       cfg: model config.
       early: () bool, hyper `drift_neutral_early`.
+      rate: () weight of the ended trial in the failure share (`failure_after`).
     """
     was_full = cur.full_at >= 0
     distance = jnp.where(ended, staircase(cur.distance, goal, drifted, was_full, cfg, early), cur.distance)
     first_full = ~was_full & (distance >= bounds(cfg)[1])
-    return Curriculum(distance=distance, full_at=jnp.where(first_full, trials + ended, cur.full_at))
+    failure = jnp.where(ended, failure_after(cur.failure, goal, drifted, rate), cur.failure)
+    return Curriculum(distance=distance, full_at=jnp.where(first_full, trials + ended, cur.full_at), failure=failure)

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from reach_jax.config import Config
+from reach_jax.config.hyper import Hyper
 from reach_jax.env import curriculum, protocol, task
 from reach_jax.physics import arm
 
@@ -56,6 +57,18 @@ class EnvParams:
 
     plan: protocol.Plan
     drift_neutral_early: jax.Array  # () bool: a drift-aided success leaves the curriculum as it is from the start
+    drift_gate: jax.Array  # () the failure share above which a target drifts; 0: every trial drifts
+    failure_rate: jax.Array  # () weight of each ended trial in the failure share (`curriculum.failure_after`)
+
+
+def env_params(plan: protocol.Plan, h: Hyper) -> EnvParams:
+    """The environment parameters of a learner running `plan` with hyperparameters `h`."""
+    return EnvParams(
+        plan=plan,
+        drift_neutral_early=h.drift_neutral_early > 0,
+        drift_gate=h.drift_gate,
+        failure_rate=1.0 / h.drift_gate_trials,
+    )
 
 
 class TrialStatus(NamedTuple):
@@ -99,7 +112,7 @@ def observe(state: EnvState, cfg: Config) -> jax.Array:
 
 
 def step_trial(
-    trial: Trial, tau: jax.Array, cond: task.Condition, cfg: Config, drift: bool = True
+    trial: Trial, tau: jax.Array, cond: task.Condition, cfg: Config, drift: bool | jax.Array = True
 ) -> tuple[Trial, TrialStatus]:
     """The trial one step on under torque `tau` (2,) [N m]; whoever runs it starts a new one when the outcome ends it.
 
@@ -108,7 +121,8 @@ def step_trial(
       tau: applied torques [N m].
       cond: the trial's condition, whose field pushes the hand.
       cfg: model config.
-      drift: move the target toward the hand once the trial runs long (training); the tests have no drift.
+      drift: move the target toward the hand once the trial runs long (training), or only where this () bool
+        array is True (the drift gate); the tests have no drift (False).
     """
     moved = arm.step(trial.arm, tau, cond.field, trial.force, cfg.arm)
     t = trial.t + 1
@@ -117,7 +131,8 @@ def step_trial(
     hand_vel = arm.hand_velocity(moved, cfg.arm)
     goal = task.goal_reached(hand, hand_vel, trial.target, cfg) & ~out_of_range
     cap = (t >= round(cfg.task.max_trial_time / cfg.arm.dt)) & ~goal & ~out_of_range
-    target, moved_target = task.drift_target(trial.target, hand, t, cfg) if drift else (trial.target, False)
+    no_drift = drift is False
+    target, moved_target = (trial.target, False) if no_drift else task.drift_target(trial.target, hand, t, cfg, drift)
     new = trial.replace(
         arm=moved, prev_arm=trial.arm, prev_tau=tau, target=target, t=t, drifted=trial.drifted | moved_target
     )
@@ -156,14 +171,14 @@ def step(
       state: the learner's environment.
       tau: applied torques [N m].
       draws: uniform draws that place the next trial if this step ends one (used only then).
-      params: the learner's protocol and curriculum rule.
+      params: the learner's protocol, curriculum rule and drift gate.
       cfg: model config.
     """
-    cont, outcome = step_trial(state.trial, tau, state.cond, cfg)
+    gate = curriculum.drift_open(state.curriculum, params.drift_gate)  # the failure share moves only between trials
+    cont, outcome = step_trial(state.trial, tau, state.cond, cfg, gate)
     done = ended(outcome)
-    cur = curriculum.after_step(
-        state.curriculum, done, outcome.goal, state.trial.drifted, state.trials, cfg, params.drift_neutral_early
-    )
+    early, rate, drifted = params.drift_neutral_early, params.failure_rate, state.trial.drifted
+    cur = curriculum.after_step(state.curriculum, done, outcome.goal, drifted, state.trials, cfg, early, rate)
     trials = state.trials + done
     fresh = next_trial(draws, cur, trials, params.plan, cfg)
     trial, cond, block = jax.tree.map(lambda a, b: jnp.where(done, a, b), fresh, (cont, state.cond, state.block))

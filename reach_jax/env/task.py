@@ -102,13 +102,19 @@ def place_trial(draws: TrialDraws, distance: jax.Array, field: fields.Field, cfg
     return state, target, force
 
 
-def drift_target(target: jax.Array, hand: jax.Array, step_in_trial: jax.Array, cfg: Config):
-    """Move the target toward the hand once the trial has lasted cfg.task.drift_after.
+def drift_target(target: jax.Array, hand: jax.Array, step_in_trial: jax.Array, cfg: Config, gate=True):
+    """Move the target toward the hand once the trial has lasted cfg.task.drift_after, if the drift gate is open.
+
+    Args:
+      target, hand: (2,) [m].
+      step_in_trial: () steps the trial has taken.
+      cfg: model config.
+      gate: () bool, the learner's drift gate is open (`curriculum.drift_open`).
 
     Returns:
       ((2,) new target [m], () bool whether it moved).
     """
-    moving = step_in_trial * cfg.arm.dt >= cfg.task.drift_after
+    moving = (step_in_trial * cfg.arm.dt >= cfg.task.drift_after) & gate
     gap = hand - target
     dist = jnp.linalg.norm(gap)
     move = jnp.minimum(cfg.task.drift_per_step, dist)

@@ -28,6 +28,13 @@ LEARNING_CURVES = (
     ("mean_trial_s", "mean trial length [s]"),
     ("distance_m", "curriculum distance [m]"),
     ("exploration", "exploration bound"),
+    ("clean_margin", "clean margin"),  # the mechanism's measures (model §5)
+    ("failure", "failure share (drift gate)"),
+    ("saturated_rate", "saturated actor outputs"),
+    ("start_value", "critic at trial start"),
+    ("w1_norm", "layer 1 weight norm"),
+    ("w2_norm", "layer 2 weight norm"),
+    ("w3_norm", "layer 3 weight norm"),
 )
 
 
@@ -38,7 +45,7 @@ def learning_curves(metrics: list[dict], cfg: Config):
       metrics: rows of metrics.jsonl (keys learner, condition, seed, trials and LEARNING_CURVES fields).
       cfg: model config.
     """
-    fig = Figure(figsize=(8, 13))
+    fig = Figure(figsize=(8, 2.2 * len(LEARNING_CURVES)))
     axes = fig.subplots(len(LEARNING_CURVES), 1, sharex=True)
     learners = sorted({(r["learner"], r["condition"], r["seed"]) for r in metrics})
     for ax, (key, label) in zip(axes, LEARNING_CURVES, strict=True):

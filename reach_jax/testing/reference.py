@@ -507,9 +507,12 @@ def value_scale(p: float, was_full: bool, shortfall: float, t: int, h: dict) -> 
 
 
 def actor_gain(scale: float, h: dict) -> float:
-    """() factor on the actor's signal of a step explored at value-scale factor `scale`: scale^-actor_gain_power."""
+    """() factor on the actor's signal of a step explored at value-scale factor `scale`: g scale^-actor_gain_power.
+
+    g is the constant actor-only gain `actor_signal_gain` (model §5); the critic's target does not see it.
+    """
     power = h["actor_gain_power"]
-    return scale**-power if power > 0 and scale > 0 else 1.0
+    return h["actor_signal_gain"] * (scale**-power if power > 0 and scale > 0 else 1.0)
 
 
 def exploration_noise(unit, bound: float, scale: float, prev, trials: int, h: dict) -> np.ndarray:
@@ -641,6 +644,17 @@ def drift_target(target, hand, step_in_trial: int, cfg: Config):
     return target + gap * (cfg.task.drift_per_step / dist), True
 
 
+def drift_open(failure: float, h: dict) -> bool:
+    """The drift gate (model §5): open without `drift_gate`, else while the recent failure share exceeds it."""
+    return h["drift_gate"] <= 0 or failure > h["drift_gate"]
+
+
+def update_failure(failure: float, goal: bool, drifted: bool, h: dict) -> float:
+    """The recent failure share after a trial: an exponential mean, time constant `drift_gate_trials` trials."""
+    failed = 0.0 if goal and not drifted else 1.0
+    return failure + (failed - failure) / h["drift_gate_trials"]
+
+
 def update_curriculum(
     distance: float, goal: bool, drifted: bool, was_full: bool, cfg: Config, early: bool = False
 ) -> float:
@@ -721,6 +735,7 @@ class Learner:
     learning: bool = True  # this trial's block updates the weights
     pending_learning: bool = True  # the pending step's block updates the weights
     was_full: bool = False  # the distance has reached the whole field
+    failure: float = 1.0  # recent share of trials that ended without a clean success (the drift gate's measure)
     trials: int = 0  # trials ended
     steps: int = 0  # steps taken
 
@@ -771,6 +786,7 @@ def learner_from_jax(state, cond: Condition) -> Learner:
         learning=bool(state.env.block.learning),
         pending_learning=bool(agent.pending_learning),
         was_full=bool(state.env.curriculum.full_at >= 0),
+        failure=float(state.env.curriculum.failure),
         trials=int(state.env.trials),
         steps=int(counters.steps),
     )
@@ -805,9 +821,10 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     pending = Pending(x=x, out=out, rnd=rnd, valid=not cap, terminal=terminal, reward=reward, gain=gain)
 
     new = replace(lrn, layers=layers, pending=pending, steps=lrn.steps + 1, pending_learning=lrn.learning)
-    if goal:
+    if goal and not (h["n_max_clean"] > 0 and lrn.drifted):  # n_max_clean: eq. 3 on clean successes only
         new.n_max = update_n_max(lrn.n_max, t, h["lam"])
     if done:
+        new.failure = update_failure(lrn.failure, goal, lrn.drifted, h)
         early = h["drift_neutral_early"] > 0
         new.distance = update_curriculum(lrn.distance, goal, lrn.drifted, lrn.was_full, cfg, early)
         new.was_full = lrn.was_full or new.distance >= curriculum_bounds(cfg)[1]
@@ -817,7 +834,9 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
         new.target, new.force, new.t, new.drifted = target, force, 0, False
         new.trials = lrn.trials + 1
     else:
-        target, moved_target = drift_target(lrn.target, hand, t, cfg)
+        # A closed drift gate keeps the target where it is: a long trial runs on to its cap.
+        gate = drift_open(lrn.failure, h)
+        target, moved_target = drift_target(lrn.target, hand, t, cfg) if gate else (np.array(lrn.target), False)
         new.arm, new.prev_arm, new.prev_tau = moved, np.array(lrn.arm), tau
         new.target, new.t, new.drifted = target, t, lrn.drifted or moved_target
     return new, StepRecord(x, out, rnd, tau, moved, goal, out_of_range, cap, loss)
@@ -859,6 +878,7 @@ def init_learner(rng: np.random.Generator, plan: list[Block], cfg: Config) -> Le
         learning=learning,
         pending_learning=learning,
         was_full=distance >= curriculum_bounds(cfg)[1],
+        failure=cfg.task.drift_gate_start,
     )
 
 

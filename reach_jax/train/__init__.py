@@ -7,8 +7,8 @@ the progress bar. Modules: `core` (the pure core), `loop` (`chunks`, `run`), `pr
 `progress`, `cli`. Units: trials, steps (of cfg.arm.dt seconds), seconds.
 """
 
-from reach_jax.train.core import NumericsError, chunk_members, finite_learners, make_train, merge_members
-from reach_jax.train.loop import Finished, chunks, dispatch, numerics_error, run
+from reach_jax.train.core import Finished, NumericsError, chunk_members, finite_learners, make_train, merge_members
+from reach_jax.train.loop import chunks, dispatch, numerics_error, run
 from reach_jax.train.metrics import hyper_values, metrics_rows, status_line, trial_records
 from reach_jax.train.prepare import Prepared, begin, default_run_dir, prepare
 from reach_jax.train.progress import LearnerEta, Progress, pow2_batch

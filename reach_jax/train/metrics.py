@@ -47,6 +47,7 @@ def metrics_rows(states: learner_state.LearnerState, hypers: hyper.Hyper, table,
     distance, n_max = np.asarray(cur.distance), np.asarray(states.agent.n_max)
     block = np.asarray(states.env.block.index)
     bound = np.asarray(exploration.schedule(hypers, states.env.trials, cur.full_at))
+    mechanism = learner_state.mechanism_columns(states, cfg)
     rows = []
     for i, ((cond, seed), values) in enumerate(zip(table, hyper_values(hypers), strict=True)):
         ended = int(s.trials[i])
@@ -75,6 +76,7 @@ def metrics_rows(states: learner_state.LearnerState, hypers: hyper.Hyper, table,
                 "n_max": float(n_max[i]),
                 "exploration": float(bound[i]),
                 "block": int(block[i]),
+                **{name: column[i] for name, column in mechanism.items()},
                 "wall_s": round(wall, 3),
             }
         )

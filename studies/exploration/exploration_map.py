@@ -60,6 +60,14 @@ def describe(h: dict) -> str:
         text += f"; actor baseline {h['actor_baseline']:g}"
     if "actor_gain_power" in h:
         text += f"; actor gain ×s^-{h['actor_gain_power']:g}"
+    if "actor_signal_gain" in h:
+        text += f"; actor-only gain {h['actor_signal_gain']:g}"
+    if "drift_gate" in h:
+        text += f"; drift only above {h['drift_gate']:g} recent failure"
+    if "drift_gate_trials" in h:
+        text += f"; failure share over {h['drift_gate_trials']:g} trials"
+    if "n_max_clean" in h:
+        text += "; N_max from clean successes"
     return text
 
 
