@@ -35,6 +35,7 @@ from reach_jax.config import (
     with_defaults,
 )
 from reach_jax.errors import OneLineError, printable
+from reach_jax.evaluate import animation
 from reach_jax.speed import DEFAULT_SPEED, MAX_HIDDEN_PAD, Speed
 
 EXIT_USAGE = 2  # bad arguments, config or checkpoint; nothing written
@@ -443,6 +444,15 @@ def build_evaluate_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="decide the claims again from RUN_DIR/eval's files (claims.json/.md, table2.md), without new episodes",
     )
+    p.add_argument(
+        "--animate",
+        nargs="?",
+        const=True,
+        type=Path,
+        metavar="GIF",
+        help="only write a GIF of a no-field network's corner movements without and with the field "
+        "(default RUN_DIR/eval/reaching.gif)",
+    )
     return p
 
 
@@ -458,6 +468,13 @@ def evaluate_main(argv=None) -> int:
             print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
             return 0
         distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
+        if args.animate is not None:
+            try:
+                gif = animation.animate(args.run_dir, None if args.animate is True else args.animate)
+            except ValueError as exc:  # the run has no network of the condition to show
+                raise UsageError(str(exc)) from None
+            print(f"animation written to {gif}", file=sys.stderr)
+            return 0
         run = run_dir_io.load(args.run_dir, args.checkpoint)
     except (UsageError, CheckpointError) as exc:
         sys.stderr.write(error_line(parser.prog, str(exc)))
