@@ -87,7 +87,7 @@ def train_until_killed():
 
 
 def _load_tool(script: str):
-    """SCRIPT.py (a path from the repository's root, such as tools/sync_readme) imported as a module: the tools and
+    """SCRIPT.py (a path from the repository's root, such as tools/sync_docs) imported as a module: the tools and
     the studies are scripts, not a package."""
     path = Path(__file__).resolve().parent.parent / f"{script}.py"
     spec = importlib.util.spec_from_file_location(Path(script).name, path)

@@ -174,7 +174,11 @@ def budgeted_step(
     """learner_step, except that a learner which has ended `budget` trials stays frozen.
 
     Args:
-      state, u, plan, hyper, speed: one learner, as for learner_step.
+      state: one learner, as for learner_step.
+      u: one learner, as for learner_step.
+      plan: one learner, as for learner_step.
+      hyper: one learner, as for learner_step.
+      speed: one learner, as for learner_step.
       budget: () trials per learner.
       cfg: model config.
     """

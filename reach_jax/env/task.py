@@ -106,7 +106,8 @@ def drift_target(target: jax.Array, hand: jax.Array, step_in_trial: jax.Array, c
     """Move the target toward the hand once the trial has lasted cfg.task.drift_after, if the drift gate is open.
 
     Args:
-      target, hand: (2,) [m].
+      target: (2,) [m].
+      hand: (2,) [m].
       step_in_trial: () steps the trial has taken.
       cfg: model config.
       gate: () bool, the learner's drift gate is open (`curriculum.drift_open`).

@@ -12,6 +12,7 @@ from pathlib import Path
 from reach_jax import evaluate
 from reach_jax.engine import distribute
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line, printable
+from reach_jax.evaluate import animation
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.store import run_lock
 from reach_jax.store.checkpoint import CheckpointError
@@ -23,6 +24,15 @@ def build_evaluate_parser() -> argparse.ArgumentParser:
     p.add_argument("run_dir", type=Path, metavar="RUN_DIR", help="run directory written by reach_jax.train")
     p.add_argument("--checkpoint", type=Path, metavar="PATH", help="evaluate this checkpoint instead of the newest")
     p.add_argument("--out", type=Path, metavar="DIR", help="write the results here instead of RUN_DIR/eval")
+    p.add_argument(
+        "--animate",
+        nargs="?",
+        const=True,
+        type=Path,
+        metavar="GIF",
+        help="only write a GIF of a no-field network's corner movements without and with the field "
+        "(default RUN_DIR/eval/reaching.gif)",
+    )
     p.add_argument(
         "--claims-only",
         action="store_true",
@@ -43,6 +53,13 @@ def main(argv=None) -> int:
             print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
             return 0
         distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
+        if args.animate is not None:
+            try:
+                gif = animation.animate(args.run_dir, None if args.animate is True else args.animate)
+            except ValueError as exc:  # the run has no network of the condition to show
+                raise UsageError(str(exc)) from None
+            print(f"animation written to {gif}", file=sys.stderr)
+            return 0
         live = run_lock.holder(args.run_dir)
         run = run_dir_io.load(args.run_dir, args.checkpoint)
     except (UsageError, CheckpointError) as exc:

@@ -41,8 +41,12 @@ def hand_gains(policy, params, mask, state, prev, prev_tau, target, start, t, cf
       policy: (params, Obs) -> (2,) torque [N m].
       params: the policy's parameters.
       mask: (125,) input mask of the network's learning condition.
-      state: (4,) arm state [rad, rad/s]; prev: (4,) the state one step before; prev_tau: (2,) [N m].
-      target, start: (2,) [m]; t: () steps into the movement.
+      state: (4,) arm state [rad, rad/s].
+      prev: (4,) the state one step before.
+      prev_tau: (2,) the torque one step before [N m].
+      target: (2,) [m].
+      start: (2,) [m].
+      t: () steps into the movement.
       cfg: model config.
     """
     tau_max = jnp.asarray(cfg.arm.tau_max)
@@ -116,8 +120,10 @@ def measure(policy, params, masks, ep: episodes.Episode, traj: episodes.Trajecto
       policy: (params, Obs) -> (2,) torque [N m], as for `episodes.run_episodes`.
       params: policy parameters with a leading network axis N.
       masks: (N, 125) input masks.
-      ep, traj: the episodes with leading axes (N, C, P), as returned by `episodes.run_episodes`.
-      starts, targets: (P, 2) [m].
+      ep: the episodes with leading axes (N, C, P), as returned by `episodes.run_episodes`.
+      traj: the episodes with leading axes (N, C, P), as returned by `episodes.run_episodes`.
+      starts: (P, 2) [m].
+      targets: (P, 2) [m].
       cfg: model config.
 
     Returns:

@@ -31,7 +31,8 @@ def straightness(hand: np.ndarray, steps: np.ndarray, starts: np.ndarray, target
     Args:
       hand: (M, T, 2) hand paths [m].
       steps: (M,) movement lengths [steps]; samples 0..steps count.
-      starts, targets: (M, 2) [m].
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
     """
     valid = np.arange(hand.shape[1])[None, :] <= steps[:, None]
     perp = np.abs(trial_log.perpendicular(trial_log.unit(targets - starts)[:, None], hand - starts[:, None]))
@@ -96,7 +97,8 @@ def movement_quality(ep: Episode, starts: np.ndarray, targets: np.ndarray, cfg: 
 
     Args:
       ep: Episode arrays with one leading axis M (numpy).
-      starts, targets: (M, 2) [m].
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
       cfg: model config (cfg.eval.peak_prominence).
     """
     ok = np.asarray(ep.outcome) == SUCCESS
@@ -122,7 +124,8 @@ def minimum_jerk_episodes(starts: np.ndarray, targets: np.ndarray, cfg: Config) 
     Sampled every cfg.arm.dt: the human-like yardstick of `quality`.
 
     Args:
-      starts, targets: (M, 2) [m].
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
       cfg: model config.
     """
     total = n_steps(cfg)
@@ -156,7 +159,8 @@ def quality(ep: Episode, learners, starts: np.ndarray, targets: np.ndarray, cfg:
     Args:
       ep: Episode arrays with leading axes (N, C, P), numpy.
       learners: (learning condition, seed index) per network.
-      starts, targets: (P, 2) [m].
+      starts: (P, 2) [m].
+      targets: (P, 2) [m].
       cfg: model config.
     """
     cells = []

@@ -90,7 +90,8 @@ def fig4(panels: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np
 
     Args:
       panels: {letter: Episode over the M corner movements} for the panels with a network.
-      starts, targets: (M, 2) [m].
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
       start_corner: (M,) index into CORNER_NAMES.
       cfg: model config.
     """

@@ -49,7 +49,8 @@ def line_deviation(path: np.ndarray, starts: np.ndarray, targets: np.ndarray) ->
 
     Args:
       path: (M, T, 2) hand paths [m] (held at their end point after the episode ends).
-      starts, targets: (M, 2) [m].
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
     """
     side = trial_log.perpendicular(trial_log.unit(targets - starts)[:, None], path - starts[:, None])
     k = np.argmax(np.abs(side), axis=-1)
@@ -76,7 +77,8 @@ def aftereffect(
 
     Args:
       paths: {"a"|"b"|"c"|"d": (M, T, 2) hand paths [m]} of one network per learning condition.
-      starts, targets: (M, 2) [m].
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
       start_corner: (M,) index into CORNER_NAMES.
       field: (2, 2) viscous field matrix of the test condition [N s/m].
 

@@ -51,7 +51,9 @@ def run_tests(
     """Every network's lattice and corner movements under every test condition, as one batch of episodes.
 
     Args:
-      policy, params, masks: as for `episodes.run_episodes`, with a leading network axis N.
+      policy: as for `episodes.run_episodes`, with a leading network axis N.
+      params: as for `episodes.run_episodes`, with a leading network axis N.
+      masks: as for `episodes.run_episodes`, with a leading network axis N.
       lattice_ends: the lattice pairs' (starts, targets), two (P, 2) [m].
       corner_ends: the Fig. 4 movements' (starts, targets), two (M, 2) [m].
       cfg: model config.

@@ -23,7 +23,8 @@ def localize(x: jax.Array, lo: float, hi: float, n: int) -> jax.Array:
 
     Args:
       x: () scalar signal.
-      lo, hi: range covered by the unit centres.
+      lo: range covered by the unit centres.
+      hi: range covered by the unit centres.
       n: number of units.
 
     Returns:
@@ -92,7 +93,9 @@ def coded_support(state: jax.Array, prev_state: jax.Array, prev_tau: jax.Array, 
     and these rows (45 of 125 for the paper's sizes).
 
     Args:
-      state, prev_state, prev_tau: as for `encode`.
+      state: as for `encode`.
+      prev_state: as for `encode`.
+      prev_tau: as for `encode`.
       cfg: model config.
 
     Returns:
