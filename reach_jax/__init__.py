@@ -12,5 +12,6 @@ The package is layered; each folder imports only the ones below it:
 - `config`: the schema of every constant, shipped tables, the paper's numbers, loading and migration.
 - `errors`: one-line user errors and the exit codes; `testing`: the NumPy oracle, for tests and benchmarks.
 
-`from reach_jax import config, train, evaluate` is the whole user import.
+`from reach_jax import config, train, evaluate` is most of a user's import; `engine.distribute.setup_backend` picks
+the devices before JAX starts, and `store.run_dir` reads a run's files.
 """
