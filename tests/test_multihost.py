@@ -49,12 +49,12 @@ def start_processes(argv, logs: Path, n: int = 2) -> list[subprocess.Popen]:
     logs.mkdir(parents=True, exist_ok=True)
     procs = []
     for i in range(n):
-        env, cluster = dict(ENV), ["--coordinator", address, "--num-processes", str(n), "--process-id", str(i)]
+        env, cluster = dict(ENV), f"coordinator={address},num_processes={n},process_id={i},"
         if i:
             env.update(JAX_COORDINATOR_ADDRESS=address, JAX_NUM_PROCESSES=str(n), JAX_PROCESS_ID=str(i))
-            cluster = []
+            cluster = ""
         with open(logs / f"{i}.log", "w") as log:
-            cmd = command([*argv, "--multihost", "--devices", "1", "--init-timeout", "60", *cluster])
+            cmd = command([*argv, "--multihost", f"{cluster}init_timeout=60", "--devices", "1"])
             procs.append(subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT))
     return procs
 
@@ -123,15 +123,17 @@ def test_two_processes_train_exactly_like_one_process_with_two_devices(tmp_path)
 @pytest.mark.parametrize(
     ("argv", "env", "message"),
     [
-        (["--process-id", "0"], {}, "--process-id needs --multihost"),
-        (["--multihost", "--num-processes", "two"], {}, "'two' is not a number"),
-        (["--multihost", "--num-processes", "0"], {}, "not a whole number in [1,"),
-        (["--multihost", "--coordinator", "localhost"], {}, "'localhost' is not HOST:PORT"),
-        (["--multihost", "--coordinator", "localhost:70000"], {}, "'70000' is not a whole number in [1, 65535]"),
-        (["--multihost", "--num-processes", "2", "--process-id", "2"], {}, "process id 2 is not below"),
+        (["--multihost", "process_idd=0"], {}, "'process_idd=0' is not KEY=VALUE (closest: process_id; keys:"),
+        (["--multihost", "process_id"], {}, "'process_id' is not KEY=VALUE"),
+        (["--multihost", "num_processes=two"], {}, "'two' is not a number"),
+        (["--multihost", "num_processes=0"], {}, "not a whole number in [1,"),
+        (["--multihost", "init_timeout=0"], {}, "not a whole number in [1,"),
+        (["--multihost", "coordinator=localhost"], {}, "'localhost' is not HOST:PORT"),
+        (["--multihost", "coordinator=localhost:70000"], {}, "'70000' is not a whole number in [1, 65535]"),
+        (["--multihost", "num_processes=2,process_id=2"], {}, "process id 2 is not below"),
         (["--multihost"], {"JAX_NUM_PROCESSES": "2", "JAX_PROCESS_ID": "2"}, "process id 2 is not below"),
         (["--multihost"], {"JAX_PROCESS_ID": "-1"}, "JAX_PROCESS_ID: '-1' is not a whole number"),
-        (["--multihost", "--process-id", "1"], {"JAX_NUM_PROCESSES": "1"}, "process id 1 is not below"),
+        (["--multihost", "process_id=1"], {"JAX_NUM_PROCESSES": "1"}, "process id 1 is not below"),
     ],
 )
 def test_bad_cluster_settings_fail_in_one_line_and_write_nothing(argv, env, message, tmp_path, monkeypatch, capsys):

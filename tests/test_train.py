@@ -415,15 +415,18 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         ["--hidden-pad", "0"],
         ["--hidden-pad", "1000"],
         ["--conditions", "none,sideways"],
-        ["--noise-final-ratio", "-0.5"],
-        ["--noise-anneal-delay", "-1"],
-        ["--noise-anneal-trials", "-5,1000"],
-        ["--noise-value-ratio", "1.5"],
-        ["--noise-corr", "1"],
-        ["--actor-baseline", "0,2"],
-        ["--quiet-every", "-1"],
-        ["--quiet-every", "2.5"],
-        ["--noise-value-lo", "0.4"],
+        ["--sweep", "noise_final_ratio=-0.5"],
+        ["--sweep", "noise_anneal_delay=-1"],
+        ["--sweep", "noise_anneal_trials=-5,1000"],
+        ["--sweep", "noise_value_ratio=1.5"],
+        ["--sweep", "noise_corr=1"],
+        ["--sweep", "actor_baseline=0,2"],
+        ["--sweep", "quiet_every=-1"],
+        ["--sweep", "quiet_every=2.5"],
+        ["--sweep", "noise_value_lo=0.4"],
+        ["--sweep", "noise_value_after_full=2"],
+        ["--sweep", "no_such_knob=1"],
+        ["--set", "learner.no_such_knob=1"],
         ["--keep-every", "-2"],
         ["--out", str(a_file)],
         ["--out", str(a_file / "sub")],
@@ -473,7 +476,8 @@ def test_config_file_set_and_flags_build_the_config_in_that_order_through_from_d
 
 def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
     argv = ["--trials", "30", "--seeds", "2", "--conditions", "none", "--chunk-steps", "300", "--noise", "0.2"]
-    sweep = ["--noise-final-ratio", "0.5,1", "--noise-anneal-delay", "0,5", "--noise-anneal-trials", "10"]
+    sweep = ["--sweep", "noise_final_ratio=0.5,1", "--sweep", "noise_anneal_delay=0,5"]
+    sweep += ["--sweep", "noise_anneal_trials=10"]
     cfg = train_cli.parse([*argv, *sweep, "--out", "/nonexistent-parse-only"]).cfg
     table, hypers = batch.learner_table(cfg.train), batch.learner_hypers(cfg)
     assert len(table) == len(hypers) == 2 * 2 * 2  # ratios x delays x seeds

@@ -2,12 +2,14 @@
 
 An entry of `TABLE` is the whole of a hyperparameter. From it come the field of `config.LearnerConfig` that holds
 its default, the `config.TrainConfig` grid that sweeps it (`<name>_grid`), its range check, the field of the
-per-learner `Hyper` arrays the compiled step reads, its command-line flag and its place in a recipe's label.
+per-learner `Hyper` arrays the compiled step reads, how the command line's `--sweep NAME=V[,V...]` reads it and its
+place in a recipe's label.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -19,7 +21,7 @@ import numpy as np
 class Hyperparameter:
     """One per-learner learning constant."""
 
-    name: str  # field of LearnerConfig and Hyper; its grid is TrainConfig.<name>_grid, its flag --<name with ->
+    name: str  # field of LearnerConfig and Hyper; its grid is TrainConfig.<name>_grid
     default: float  # the value of a run that does not set it
     help: str  # what it is, with the paper's equation or the documented choice (model §n)
     low: float = 0.0  # smallest allowed value
@@ -27,6 +29,7 @@ class Hyperparameter:
     high: float = math.inf  # largest allowed value
     high_open: bool = False  # True: the value must stay below `high`
     integer: bool = False  # a count: stored as a whole number in the config
+    switch: bool = False  # on/off: 0 or 1 (true or false on the command line), 1 = on; stored as a float
     neutral: float | None = None  # the value that switches an optional form off; a recipe label names it only
     # when another value is set. None: always named.
 
@@ -36,12 +39,33 @@ class Hyperparameter:
         return f"{self.name}_grid"
 
     @property
-    def flag(self) -> str:
-        """Its command-line flag."""
-        return "--" + self.name.replace("_", "-")
+    def bounds(self) -> str:
+        """Its allowed values in words, as --list-hyper shows them."""
+        if self.switch:
+            return "true/false"
+        left, right = "(" if self.low_open else "[", ")" if self.high_open or self.high == math.inf else "]"
+        whole = "whole, " if self.integer else ""
+        return f"{whole}{left}{self.low:g}, {self.high:g}{right}"
+
+    def parse(self, text: str) -> float:
+        """A command-line value of it (a number; true/false too for a switch); raises ValueError saying why not."""
+        word = text.strip().lower()
+        if self.switch and word in SWITCH_WORDS:
+            return SWITCH_WORDS[word]
+        try:
+            value = float(word)
+        except ValueError:
+            kind = "true, false, 0 or 1" if self.switch else "a number"
+            raise ValueError(f"{self.name}={text!r} is not {kind}") from None
+        why = self.check(value)
+        if why:
+            raise ValueError(f"{self.name}={text!r}: {why}")
+        return int(value) if self.integer else value
 
     def check(self, value: float) -> str | None:
         """Why `value` is out of range, or None when it is allowed."""
+        if self.switch:
+            return None if value in (0.0, 1.0) else "must be 0 or 1 (a switch: false or true)"
         too_low = value <= self.low if self.low_open else value < self.low
         too_high = value >= self.high if self.high_open else value > self.high
         if self.integer and math.isfinite(value) and value != int(value):
@@ -81,8 +105,9 @@ TABLE = (
     Hyperparameter(
         "noise_value_after_full",
         0.0,
-        "1: the value scaling starts once the curriculum has first reached the whole field (model §5 choice)",
+        "true: the value scaling starts once the curriculum has first reached the whole field (model §5 choice)",
         high=1.0,
+        switch=True,
         neutral=0.0,
     ),
     Hyperparameter(
@@ -132,8 +157,9 @@ TABLE = (
     Hyperparameter(
         "drift_neutral_early",
         0.0,
-        "1: a drift-aided success leaves the curriculum unchanged before the first full field too (model §5 choice)",
+        "true: a drift-aided success leaves the curriculum unchanged before the first full field too (model §5 choice)",
         high=1.0,
+        switch=True,
         neutral=0.0,
     ),
     Hyperparameter(
@@ -155,8 +181,9 @@ TABLE = (
     Hyperparameter(
         "n_max_clean",
         0.0,
-        "1: eq. 3 takes only successes without drift into N_max (departs from eq. 3's every success, model §5)",
+        "true: eq. 3 takes only successes without drift into N_max (departs from eq. 3's every success, model §5)",
         high=1.0,
+        switch=True,
         neutral=0.0,
     ),
     Hyperparameter(
@@ -170,10 +197,34 @@ TABLE = (
 
 NAMES = tuple(h.name for h in TABLE)
 BY_NAME = {h.name: h for h in TABLE}
+SWITCH_WORDS = {"false": 0.0, "true": 1.0}  # a switch's words on the command line, beside 0 and 1
 
 # A NamedTuple is a JAX pytree without importing JAX here: config and the NumPy oracle import this table.
 Hyper = NamedTuple("Hyper", [(h.name, Any) for h in TABLE])
 Hyper.__doc__ = "Per-learner learning constants, one () array each (a sweep is just a batch of learners)."
+
+
+def lookup(name: str) -> Hyperparameter:
+    """The entry called `name`; raises ValueError naming the closest name when there is none."""
+    if name in BY_NAME:
+        return BY_NAME[name]
+    close = difflib.get_close_matches(name, NAMES, n=1)
+    hint = f"; closest: {close[0]}" if close else ""
+    raise ValueError(f"no hyperparameter {name!r}{hint} (--list-hyper lists them)")
+
+
+def table_text() -> str:
+    """The table as aligned text, one line an entry: name, default, allowed values, help (what --list-hyper prints)."""
+    rows = [("name", "default", "range", "help")]
+    rows += [(h.name, _default_text(h), h.bounds, h.help) for h in TABLE]
+    widths = [max(len(r[i]) for r in rows) for i in range(3)]
+    return "".join("  ".join([*(c.ljust(w) for c, w in zip(r[:3], widths, strict=True)), r[3]]) + "\n" for r in rows)
+
+
+def _default_text(h: Hyperparameter) -> str:
+    if h.switch:
+        return "true" if h.default else "false"
+    return f"{h.default:g}" if not h.integer else str(h.default)
 
 
 def config_fields() -> list[tuple]:

@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import math
 
@@ -77,7 +78,8 @@ def _build(cls, raw, where: str, base=None, complete: bool = False):
     values = {}
     for key, value in raw.items():
         if key not in names or key == "name":
-            raise ValueError(f"{where}.{printable(key)}: unknown field")
+            close = difflib.get_close_matches(str(key), sorted(names - {"name"}), n=1)
+            raise ValueError(f"{where}.{printable(key)}: unknown field" + (f"; closest: {close[0]}" if close else ""))
         value = tuplify(value)
         _check_type(f"{where}.{key}", value, getattr(base, key))
         values[key] = _coerce(value, getattr(base, key))

@@ -8,6 +8,7 @@ here runs at import; the command lines call `setup_backend` before JAX's first c
 from __future__ import annotations
 
 import argparse
+import difflib
 import functools
 import os
 import subprocess
@@ -216,7 +217,7 @@ def on_mesh(tree, mesh: Mesh):
     return shard_learners(tree, mesh)
 
 
-# Where --multihost looks for a setting that its flag does not give (jax itself reads only the first).
+# Where --multihost looks for a setting that its own KEY=VALUE list does not give (jax itself reads only the first).
 CLUSTER_ENV = {
     "coordinator": "JAX_COORDINATOR_ADDRESS",
     "num_processes": "JAX_NUM_PROCESSES",
@@ -233,34 +234,56 @@ def coordinator(text: str) -> str:
     return text
 
 
-def cluster_settings(args, environ=None) -> Cluster | None:
-    """How to join a multi-process run: the flags, else the JAX_* variables of `environ`; None without --multihost.
+# The settings of --multihost KEY=VALUE,... and how each value is read.
+CLUSTER_SETTINGS = {
+    "coordinator": coordinator,
+    "num_processes": positive_int,
+    "process_id": non_negative_int,
+    "init_timeout": positive_int,
+}
 
-    Raises UsageError for a malformed value, a process id out of range, or a cluster flag without --multihost.
+
+def multihost_settings(text: str) -> dict:
+    """An argparse type: --multihost's KEY=VALUE,... (keys of CLUSTER_SETTINGS, "" for none), each value read."""
+    found = {}
+    for item in (part.strip() for part in text.split(",")):
+        if not item:
+            continue
+        key, sep, value = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if key not in CLUSTER_SETTINGS or not sep:
+            close = difflib.get_close_matches(key, CLUSTER_SETTINGS, n=1)
+            hint = f"closest: {close[0]}; " if close else ""
+            raise argparse.ArgumentTypeError(f"{item!r} is not KEY=VALUE ({hint}keys: {', '.join(CLUSTER_SETTINGS)})")
+        found[key] = CLUSTER_SETTINGS[key](value.strip())
+    return found
+
+
+def cluster_settings(args, environ=None) -> Cluster | None:
+    """How to join a multi-process run: --multihost's settings, else the JAX_* variables of `environ`; None without
+    --multihost.
+
+    Raises UsageError for a malformed value or a process id out of range.
 
     Args:
-      args: the parsed command line.
+      args: the parsed command line; args.multihost is None or the dict of `multihost_settings`.
       environ: environment to read (default os.environ).
     """
-    if not args.multihost:
-        given = [name for name in (*CLUSTER_ENV, "init_timeout") if getattr(args, name) is not None]
-        if given:
-            raise UsageError(f"--{given[0].replace('_', '-')} needs --multihost")
+    if args.multihost is None:
         return None
     environ = os.environ if environ is None else environ
-    parse_value = {"coordinator": coordinator, "num_processes": positive_int, "process_id": non_negative_int}
     found = {}
     for name, var in CLUSTER_ENV.items():
-        value = getattr(args, name)
+        value = args.multihost.get(name)
         if value is None and environ.get(var, "").strip():
             try:
-                value = parse_value[name](environ[var].strip())
+                value = CLUSTER_SETTINGS[name](environ[var].strip())
             except argparse.ArgumentTypeError as exc:
                 raise UsageError(f"{var}: {exc}") from None
         found[name] = value
     n, i = found["num_processes"], found["process_id"]
     if n is not None and i is not None and i >= n:
         raise UsageError(f"process id {i} is not below the number of processes {n}")
-    if args.init_timeout is not None:
-        found["init_timeout"] = args.init_timeout
+    if "init_timeout" in args.multihost:
+        found["init_timeout"] = args.multihost["init_timeout"]
     return Cluster(**found)

@@ -8,6 +8,7 @@ run directory that another live process trains (`store.run_lock`).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import sys
@@ -22,13 +23,12 @@ from reach_jax import train
 from reach_jax.config import (
     CONDITIONS,
     Config,
-    first_difference,
     hyper,
     to_dict,
     to_json,
     tuplify,
 )
-from reach_jax.config.overlay import build_config, checked_config, with_settings
+from reach_jax.config.overlay import PAPER_HYPER, build_config, checked_config, folded, same_learners, with_settings
 from reach_jax.config.schema import DEFAULT_SPEED, MAX_HIDDEN_PAD, Speed
 from reach_jax.engine import distribute
 from reach_jax.errors import (
@@ -58,14 +58,38 @@ def _conditions(text: str) -> tuple[str, ...]:
     return tuple(n for n in text.replace(",", " ").split() if n)
 
 
-def _numbers(text: str) -> tuple[float, ...]:
+def _values(h: hyper.Hyperparameter, text: str) -> tuple[float, ...]:
+    """Comma-separated values of hyperparameter h, each read and range-checked by the table."""
     try:
-        values = tuple(float(v) for v in text.split(",") if v.strip())
-    except ValueError:
-        values = ()
+        values = tuple(h.parse(v) for v in text.split(",") if v.strip())
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
     if not values:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a comma-separated list of numbers")
+        raise argparse.ArgumentTypeError(f"{h.name}={text!r}: no value")
     return values
+
+
+def _sweep(text: str) -> tuple[str, tuple[float, ...]]:
+    """NAME=V[,V...] as (name, values), the name looked up in the hyperparameter table."""
+    name, sep, raw = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=V[,V...]")
+    try:
+        h = hyper.lookup(name.strip())
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return h.name, _values(h, raw)
+
+
+class _ListHyper(argparse.Action):
+    """--list-hyper: print the hyperparameter table and exit 0, as --help does."""
+
+    def __init__(self, option_strings, dest, **kwargs):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        sys.stdout.write(hyper.table_text())
+        parser.exit()
 
 
 def _setting(text: str) -> tuple[str, str, object]:
@@ -81,18 +105,20 @@ def _setting(text: str) -> tuple[str, str, object]:
 
 
 def build_train_parser() -> argparse.ArgumentParser:
-    """The command-line interface of `python -m reach_jax.train`."""
-    p = Parser(prog="python -m reach_jax.train", description=train.__doc__.splitlines()[0])
-    p.add_argument("--config", type=Path, metavar="FILE", help="start from this config (JSON, as in config.json)")
-    p.add_argument("--trials", type=positive_int, help="trials per learner (2e6 in the paper)")
-    p.add_argument("--seeds", type=positive_int, help="networks per condition (2 in the paper)")
-    p.add_argument(
+    """The command-line interface of `python -m reach_jax.train`: the core flags, then the infrastructure ones."""
+    p = Parser(prog="python -m reach_jax.train", description=train.__doc__.splitlines()[0], add_help=False)
+    core = p.add_argument_group("core")
+    core.add_argument("-h", "--help", action="help", help="show this help and exit")
+    core.add_argument("--config", type=Path, metavar="FILE", help="start from this config (JSON, as in config.json)")
+    core.add_argument("--trials", type=positive_int, help="trials per learner (2e6 in the paper)")
+    core.add_argument("--seeds", type=positive_int, help="networks per condition (2 in the paper)")
+    core.add_argument(
         "--conditions",
         type=_conditions,
         help=f"comma-separated names from the conditions table (the paper's: {','.join(CONDITIONS)}; add one with "
         "--config FILE or --set conditions.NAME.FIELD=JSON)",
     )
-    p.add_argument(
+    core.add_argument(
         "--protocol",
         dest="protocols",
         type=_conditions,
@@ -100,72 +126,81 @@ def build_train_parser() -> argparse.ArgumentParser:
         "one with --config FILE or --set protocols.NAME=JSON); without --conditions only these learners run, and "
         "--trials defaults to the protocol's length",
     )
-    p.add_argument(
-        "--init-from",
-        type=str,
-        metavar="RUN_DIR",
-        help="start each learner from the trained network of this run with its seed and first block's condition",
-    )
-    p.add_argument(
-        "--trial-log-every",
-        type=non_negative_int,
-        metavar="N",
-        help="log every N-th trial's movement (errors, outcome, time) to RUN_DIR/trials (default 0: no log)",
-    )
-    p.add_argument("--seed", type=non_negative_int, help="master PRNG seed (default 0)")
-    p.add_argument("--chunk-steps", type=positive_int, help="learner steps per compiled chunk")
-    for h in hyper.TABLE:
-        p.add_argument(h.flag, type=_numbers, metavar="X[,X...]", help=f"{h.help}; a comma-separated list sweeps it")
-    p.add_argument(
-        "--keep-every",
-        type=non_negative_int,
-        metavar="CHUNKS",
-        help="also keep every CHUNKS-th checkpoint as a snapshot (default 0: only the newest two)",
-    )
-    p.add_argument(
+    core.add_argument("--seed", type=non_negative_int, help="master PRNG seed (default 0)")
+    core.add_argument("--out", type=Path, help="run directory (default runs/<name>)")
+    core.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a run from its newest checkpoint")
+    core.add_argument(
         "--set",
         type=_setting,
         action="append",
         default=[],
         metavar="SECTION.FIELD=JSON",
-        help="set any config field, e.g. learner.lr=0.5 or conditions.curl.viscous=[[0,13],[-13,0]] "
-        "(after --config, before the flags above)",
+        help="set any config field, e.g. learner.critic_floor=-0.2 or conditions.curl.viscous=[[0,13],[-13,0]] "
+        "(after --config, before the other flags); learner.NAME=V of a hyperparameter is --sweep NAME=V",
     )
-    p.add_argument("--out", type=Path, help="run directory (default runs/<name>)")
-    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a run from its newest checkpoint")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument(
+    core.add_argument("--quiet", action="store_true", help="no progress bar")
+    for name in PAPER_HYPER:
+        h = hyper.BY_NAME[name]
+        core.add_argument(
+            f"--{name}",
+            type=functools.partial(_values, h),
+            metavar="V[,V...]",
+            help=f"{h.help}; default {h.default:g}; one value sets it, several sweep it",
+        )
+    core.add_argument(
+        "--sweep",
+        type=_sweep,
+        action="append",
+        default=[],
+        metavar="NAME=V[,V...]",
+        help="any hyperparameter of --list-hyper, repeatable: one value sets it (learner.NAME), several sweep it "
+        "(train.NAME_grid, crossed with the other grids); a switch takes true/false or 1/0",
+    )
+    core.add_argument("--list-hyper", action=_ListHyper, help="print the hyperparameters (name, default, range, help)")
+
+    infra = p.add_argument_group("infrastructure", "devices, chunking and logging, multi-host")
+    infra.add_argument(
+        "--devices",
+        type=positive_int,
+        help="CPU only: host devices to shard learners over, one per core at most (default: one per core)",
+    )
+    infra.add_argument("--chunk-steps", type=positive_int, help="learner steps per compiled chunk")
+    infra.add_argument(
+        "--keep-every",
+        type=non_negative_int,
+        metavar="CHUNKS",
+        help="also keep every CHUNKS-th checkpoint as a snapshot (default 0: only the newest two)",
+    )
+    infra.add_argument(
+        "--trial-log-every",
+        type=non_negative_int,
+        metavar="N",
+        help="log every N-th trial's movement (errors, outcome, time) to RUN_DIR/trials (default 0: no log)",
+    )
+    infra.add_argument(
+        "--init-from",
+        type=str,
+        metavar="RUN_DIR",
+        help="start each learner from the trained network of this run with its seed and first block's condition",
+    )
+    infra.add_argument(
         "--hidden-pad",
         type=_hidden_pad,
         help=f"pad the first hidden layer to a multiple of this inside the compiled loop (speed only, not stored; "
         f"1 = off; default {DEFAULT_SPEED.hidden_pad})",
     )
-    p.add_argument(
-        "--devices",
-        type=positive_int,
-        help="CPU only: host devices to shard learners over, one per core at most (default: one per core)",
-    )
-    p.add_argument(
+    infra.add_argument(
         "--multihost",
-        action="store_true",
-        help="join a multi-process run (jax.distributed.initialize); the three settings below come from their "
-        "flags, else from JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID, else from the cluster "
-        "(SLURM, Open MPI); process 0 writes the run directory, which --resume needs on a shared file system",
-    )
-    p.add_argument(
-        "--coordinator",
-        type=distribute.coordinator,
-        metavar="HOST:PORT",
-        help="with --multihost: address of process 0, where it serves the other processes",
-    )
-    p.add_argument("--num-processes", type=positive_int, metavar="N", help="with --multihost: processes in the run")
-    p.add_argument("--process-id", type=non_negative_int, metavar="I", help="with --multihost: this process, 0 to N-1")
-    p.add_argument(
-        "--init-timeout",
-        type=positive_int,
-        metavar="SECONDS",
-        help="with --multihost: how long to wait for every process to connect "
-        f"(default {distribute.Cluster._field_defaults['init_timeout']})",
+        nargs="?",
+        const="",
+        type=distribute.multihost_settings,
+        metavar="KEY=VALUE,...",
+        help="join a multi-process run (jax.distributed.initialize) with any of the settings coordinator=HOST:PORT "
+        "(process 0's address, where it serves the others), num_processes=N, process_id=I (0 to N-1) and "
+        f"init_timeout=SECONDS (to wait for every process to connect; default "
+        f"{distribute.Cluster._field_defaults['init_timeout']}); the first three not given come from "
+        "JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID, else from the cluster (SLURM, Open MPI); "
+        "process 0 writes the run directory, which --resume needs on a shared file system",
     )
     return p
 
@@ -208,9 +243,10 @@ def validate(args: argparse.Namespace) -> Invocation:
             asked = checked_config(with_settings(to_dict(cfg), args))
         except (TypeError, ValueError) as exc:
             raise UsageError(str(exc)) from None
-        diff = first_difference(cfg, asked)
+        # A one-value grid and the learner's default are the same learners: either spelling resumes either.
+        diff = same_learners(cfg, asked)
         if diff:
-            stored, wanted = (_field(c, diff) for c in (cfg, asked))
+            stored, wanted = (_field(folded(c), diff) for c in (cfg, asked))
             raise CheckpointError(f"{args.resume / run_dir_io.CONFIG_FILE}: field {diff} is {stored!r}, not {wanted!r}")
         return Invocation(train.prepare(cfg, args.resume, resume=True, speed=speed), args.quiet)
     cfg = build_config(args)
