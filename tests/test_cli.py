@@ -18,6 +18,7 @@ from reach_jax import errors
 from reach_jax.config import Config, LearnerConfig, TrainConfig, hyper
 from reach_jax.engine import batch
 from reach_jax.store import run_dir as run_dir_io
+from reach_jax.train import arguments
 from reach_jax.train import cli as train_cli
 
 PROG = "python -m reach_jax.train: error:"
@@ -40,7 +41,7 @@ def options(parser) -> list[str]:
 
 
 def test_help_shows_at_most_24_options_in_the_core_and_infrastructure_groups(capsys):
-    parser = train_cli.build_train_parser()
+    parser = arguments.build_train_parser()
     assert len(options(parser)) <= 24
     with pytest.raises(SystemExit) as exit_:
         train_cli.main(["--help"])

@@ -2,7 +2,8 @@
 
 It follows the paper's equations line by line and is written independently of the JAX code: no jax import,
 explicit loops, np.linalg.solve for eq. 4-5, a hand-written backprop. It can replay a JAX run from the noise
-and uniform draws of a JAX run (`reach_jax.engine.random_stream.step_uniforms`), or run on its own numpy RNG (`run_reference`).
+and uniform draws of a JAX run (`reach_jax.engine.random_stream.step_uniforms`), or run on its own numpy RNG
+(`run_reference`).
 
 Units: joint angles [rad], joint velocities [rad/s], torques [N m], hand positions [m] in the shoulder frame
 (x right, y forward), hand velocities [m/s], hand forces [N], viscous fields [N s/m], time [s]; network signals
