@@ -160,7 +160,7 @@ def schedule_steps(run_dir: Path) -> tuple[list[float] | None, str]:
     A learner that has not reached 2e6 trials is extrapolated with the mean trial length of its last
     TAIL_CHUNKS chunks.
     """
-    path = Path(run_dir) / run_dir_io.METRICS_FILE
+    path = run_dir_io.metrics_path(run_dir)
     rows = run_dir_io.read_metrics(run_dir)
     if not rows:
         return None, f"no rows in {path}: no schedule estimate"

@@ -4,7 +4,7 @@ The package is layered; each folder imports only the ones below it:
 
 - `evaluate`: reads trained networks: Table 2, Fig. 4-5, after-effect, impedance, adaptation, the claims; its CLI.
 - `train`: the loop over compiled chunks, its sinks (metrics, checkpoints, progress) and its CLI.
-- `store`: run directories, checkpoints, durable file writes.
+- `store`: run directories, their metrics log, checkpoints, durable file writes.
 - `engine`: a learner's state, its random stream, the agent step, compiled chunks, batches, devices.
 - `agent`: the network, the TS actor-critic learner, exploration.
 - `env`: the trial (reset, step, auto-reset), task, curriculum, protocols, the per-trial log.

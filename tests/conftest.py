@@ -41,9 +41,10 @@ def metrics_without_wall(run_dir: Path) -> list[dict]:
 
 @pytest.fixture(scope="session")
 def uninterrupted(tmp_path_factory) -> Path:
-    """The ARGV run trained in one go, the reference of every interrupted one."""
+    """The ARGV run trained in one go, the reference of every interrupted one; it keeps every checkpoint (a snapshot
+    each chunk, which changes no result), for the tests that resume it from an earlier one."""
     out = tmp_path_factory.mktemp("whole") / "run"
-    assert cli.main([*ARGV, "--out", str(out), "--quiet"]) == 0
+    assert cli.main([*ARGV, "--keep-every", "1", "--out", str(out), "--quiet"]) == 0
     return out
 
 

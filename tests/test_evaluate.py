@@ -336,8 +336,10 @@ def test_cli_corrupt_checkpoint_and_metrics(tiny_run, tmp_path, capsys):
     _cli_error(bad, capsys, newest)
     shutil.rmtree(bad)
     shutil.copytree(tiny_run, bad)
-    (bad / run_dir_io.METRICS_FILE).write_text('{"chunk": 1}\n{torn\n')
+    (bad / run_dir_io.METRICS_FILE).write_bytes(b"not gzip")
     _cli_error(bad, capsys, bad / run_dir_io.METRICS_FILE)
+    (bad / run_dir_io.LEGACY_METRICS_FILE).write_text('{"chunk": 1}\n{torn\n')  # a run from before the gzip form
+    _cli_error(bad, capsys, bad / run_dir_io.LEGACY_METRICS_FILE)
 
 
 def test_quality_markdown_marks_a_cell_without_successes():
@@ -438,3 +440,27 @@ def test_claims_only_decides_the_committed_files_again_as_the_full_evaluation_di
     assert evaluate_cli.main([str(fresh), "--claims-only"]) == errors.EXIT_USAGE
     lines = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
     assert len(lines) == 2 and "--claims-only" in lines[0] and "table2.json: missing" in lines[1]
+
+
+@pytest.mark.slow
+def test_a_second_evaluation_rewrites_no_figure_and_changed_data_redraw_theirs(tiny_run, tmp_path):
+    out = tmp_path / "eval"
+    evaluate.evaluate(tiny_run, out=out)
+
+    def pngs():
+        return {p.name: (p.read_bytes(), p.stat().st_mtime_ns, p.stat().st_ino) for p in out.glob("*.png")}
+
+    first = pngs()
+    assert set(first) == {"impedance.png", "fig4.png", "fig5.png", "learning_curves.png"}
+    assert set(json.loads((out / evaluate.FIGURE_DIGESTS).read_text())) == set(first)
+    run = run_dir_io.load(tiny_run)
+    results = evaluate.evaluate_run(run)  # a second evaluation of the same run, as `evaluate` makes it
+    evaluate.write_results(tiny_run, run, results, out)
+    assert pngs() == first
+    # Fewer metrics rows change the learning curves alone; a missing PNG is drawn again whatever its digest.
+    (out / "fig5.png").unlink()
+    evaluate.write_results(tiny_run, run._replace(metrics=run.metrics[: len(run.learners)]), results, out)
+    now = pngs()
+    assert now.keys() == first.keys() and now["fig5.png"][0] == first["fig5.png"][0]
+    assert now["learning_curves.png"][0] != first["learning_curves.png"][0]
+    assert {n: now[n] for n in ("impedance.png", "fig4.png")} == {n: first[n] for n in ("impedance.png", "fig4.png")}

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from reach_jax import config, train
+from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train.progress import LearnerEta, Progress, pow2_batch
 
 
@@ -81,7 +82,7 @@ def committed_profile(run: str):
     """A committed run's learners, chunk by chunk: (trials (C, L), steps (C, L), budget, chunk steps)."""
     root = Path(__file__).resolve().parent.parent / "runs" / run
     train_cfg = json.loads((root / "config.json").read_text())["train"]
-    rows = [json.loads(line) for line in (root / "metrics.jsonl").read_text().splitlines()]
+    rows = run_dir_io.read_metrics(root)
     chunks = sorted({r["chunk"] for r in rows})
     where = {c: i for i, c in enumerate(chunks)}
     trials = np.full((len(chunks), max(r["learner"] for r in rows) + 1), np.nan)
@@ -122,9 +123,9 @@ def fake_clock(run: str) -> np.ndarray:
 
 def wall_clock(run: str) -> np.ndarray:
     """A committed run's chunk end times [s] as its metrics recorded them (`wall_s`)."""
-    rows = (Path(__file__).resolve().parent.parent / "runs" / run / "metrics.jsonl").read_text().splitlines()
+    rows = run_dir_io.read_metrics(Path(__file__).resolve().parent.parent / "runs" / run)
     wall: dict[int, float] = {}
-    for row in map(json.loads, rows):
+    for row in rows:
         wall[row["chunk"]] = max(wall.get(row["chunk"], 0.0), row["wall_s"])
     return np.array([wall[c] for c in sorted(wall)])
 

@@ -70,10 +70,11 @@ def test_a_reader_passes_over_a_checkpoint_pruned_under_it_but_not_over_a_corrup
     monkeypatch.setattr(checkpoint, "list_checkpoints", listed_then_pruned)
     assert run_dir_io.load(out).chunk == checkpoint.checkpoint_chunk(newest) and len(listings) == 2
     monkeypatch.undo()
-    # An unterminated last metrics line is an append in flight, of a chunk past every checkpoint.
+    # A gzip member cut short is an append in flight, of a chunk past every checkpoint.
     rows = run_dir_io.read_metrics(out)
-    with open(out / run_dir_io.METRICS_FILE, "a") as f:
-        f.write('{"chunk": 99, "lear')
+    whole = (out / run_dir_io.METRICS_FILE).read_bytes()
+    run_dir_io.append_metrics(out, [{**r, "chunk": 99} for r in rows if r["chunk"] == rows[-1]["chunk"]])
+    (out / run_dir_io.METRICS_FILE).write_bytes((out / run_dir_io.METRICS_FILE).read_bytes()[: len(whole) + 30])
     assert run_dir_io.read_metrics(out) == rows
     newest.write_bytes(newest.read_bytes()[:100])
     with pytest.raises(checkpoint.CheckpointError, match="corrupt or truncated"):

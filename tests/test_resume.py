@@ -36,6 +36,9 @@ from reach_jax.store import checkpoint, run_lock
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import cli as train_cli
 
+# A run of three chunks of one learner.
+SHORT, SHORT_CHUNKS = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "100"], 3
+
 
 def cfg_of(argv) -> Config:
     return train_cli.parse([*argv, "--out", "/nonexistent-parse-only"]).cfg
@@ -75,6 +78,7 @@ def test_resume_after_sigkill_is_bit_identical(uninterrupted, tmp_path, train_un
         np.testing.assert_array_equal(arrays[k], want[k], err_msg=k)
     assert metrics_without_wall(out) == metrics_without_wall(uninterrupted)
     assert not run_lock.lock_path(out).exists()
+    assert len(checkpoint.list_checkpoints(out)) == 1  # finished: its final checkpoint alone
 
 
 def older_copy(uninterrupted: Path, tmp_path: Path) -> tuple[Path, Path]:
@@ -180,25 +184,58 @@ def test_a_prepared_run_carries_its_own_settings(uninterrupted, tmp_path):
         train.run(prepared, tmp_path / "elsewhere")
 
 
-def test_snapshots_are_kept_every_n_chunks(tmp_path):
+@pytest.mark.slow
+def test_snapshots_are_kept_every_n_chunks_and_a_finished_run_keeps_its_final_checkpoint(tmp_path):
     out = tmp_path / "run"
     assert train_cli.main([*ARGV, "--keep-every", "3", "--out", str(out), "--quiet"]) == 0
     chunks = [checkpoint.checkpoint_chunk(p) for p in checkpoint.list_checkpoints(out)]
     last = max(chunks)
-    assert last > 7
-    assert chunks == sorted({c for c in range(last + 1) if c % 3 == 0} | {last - 1, last})
+    assert last > 7 and last % 3 != 0
+    assert chunks == sorted({c for c in range(last + 1) if c % 3 == 0} | {last})
 
 
-def test_metrics_past_the_checkpoint_and_torn_lines_are_dropped_on_resume(tmp_path):
+def test_a_finished_run_keeps_its_final_checkpoint_only(tmp_path):
     out = tmp_path / "run"
-    argv = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "100"]
-    assert train_cli.main([*argv, "--out", str(out), "--quiet"]) == 0
-    good = (out / run_dir_io.METRICS_FILE).read_text()
-    last = json.loads(good.splitlines()[-1])["chunk"]
-    later = json.dumps({"chunk": last + 1, "learner": 0})
-    (out / run_dir_io.METRICS_FILE).write_text(good + later + "\n" + '{"chunk": ')
+    assert train_cli.main([*SHORT, "--out", str(out), "--quiet"]) == 0
+    assert [p.name for p in checkpoint.list_checkpoints(out)] == [f"chunk_{SHORT_CHUNKS:07d}.npz"]
+
+
+def test_a_training_run_keeps_its_newest_two_checkpoints_and_a_finished_one_its_last(tmp_path):
+    tree = {"w": np.zeros(2)}
+    for chunk in range(5):
+        checkpoint.save(tmp_path, chunk, tree, {})
+    assert [checkpoint.checkpoint_chunk(p) for p in checkpoint.list_checkpoints(tmp_path)] == [3, 4]
+    checkpoint.prune(tmp_path, checkpoint.KEEP_FINISHED)
+    assert [checkpoint.checkpoint_chunk(p) for p in checkpoint.list_checkpoints(tmp_path)] == [4]
+    for chunk in range(5, 12):
+        checkpoint.save(tmp_path, chunk, tree, {}, keep_every=4)
+    checkpoint.prune(tmp_path, checkpoint.KEEP_FINISHED, keep_every=4)
+    assert [checkpoint.checkpoint_chunk(p) for p in checkpoint.list_checkpoints(tmp_path)] == [4, 8, 11]
+
+
+def test_metrics_past_the_checkpoint_and_a_torn_gzip_member_are_dropped_on_resume(tmp_path):
+    out = tmp_path / "run"
+    assert train_cli.main([*SHORT, "--out", str(out), "--quiet"]) == 0
+    path = out / run_dir_io.METRICS_FILE
+    good, rows = path.read_bytes(), run_dir_io.read_metrics(out)
+    assert max(r["chunk"] for r in rows) == SHORT_CHUNKS
+    later = [{**r, "chunk": SHORT_CHUNKS + 1} for r in rows if r["chunk"] == SHORT_CHUNKS]
+    run_dir_io.append_metrics(out, later)  # a chunk whose checkpoint was never written
+    run_dir_io.append_metrics(out, later)
+    path.write_bytes(path.read_bytes()[:-7])  # and an append cut short by a kill
+    assert run_dir_io.read_metrics(out) == rows + later
     assert train_cli.main(["--resume", str(out), "--quiet"]) == 0
-    assert (out / run_dir_io.METRICS_FILE).read_text() == good
+    assert path.read_bytes() == good
+
+
+@pytest.mark.slow
+def test_every_committed_run_validates_for_resume():
+    root = Path(__file__).resolve().parent.parent / "runs"
+    runs = sorted(p.parent for p in root.glob(f"*/{run_dir_io.CONFIG_FILE}"))
+    assert len(runs) > 10
+    for run in runs:
+        invocation = train_cli.parse(["--resume", str(run)])
+        assert invocation.prepared.chunk == checkpoint.checkpoint_chunk(checkpoint.list_checkpoints(run)[-1]), run
 
 
 def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupted, tmp_path, capsys):

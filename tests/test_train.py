@@ -504,7 +504,7 @@ def test_metrics_rows_read_the_batchs_hyperparameters_spelled_as_the_config():
     hypers = group.hypers._replace(noise=jnp.asarray([0.2, 0.35], jnp.float32))
     rows = train.metrics_rows(jax.device_get(group.states), hypers, batch.learner_table(cfg.train), 1, 0.0, cfg)
     assert [r["noise"] for r in rows] == [0.2, 0.35]  # the batch's, not the config's 0.2 twice
-    assert rows[1]["exploration"] == float(np.float32(0.35))  # not annealed yet: the batch's bound
+    assert rows[1]["exploration"] == 0.35  # not annealed yet: the batch's bound, at its float32 precision
     first = json.dumps({k: rows[0][k] for k in hyper.NAMES})
     assert first == json.dumps(batch.learner_hypers(cfg)[0])  # 0.2 and 300000, not 0.20000000298 or 300000.0
 

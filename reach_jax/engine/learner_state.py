@@ -98,7 +98,8 @@ def mechanism_columns(states: LearnerState, cfg: Config) -> dict[str, list]:
     clean_rate: share of ended trials at the goal without drift; clean_margin: that share less the drift-aided
     successes' and the outs'; gate_open_rate: share run with the drift gate open; failure: the gate's failure share
     now; saturated_rate: share of actor outputs beyond cfg.train.saturated_output; start_value: mean critic value at
-    a trial's first step; w<i>_norm: Frobenius norm of layer i's kernel now.
+    a trial's first step; w<i>_norm: Frobenius norm of layer i's kernel now. failure and w<i>_norm are np.float32,
+    the shares and start_value float.
 
     Args:
       states: every learner after the chunk, learner axis first (host arrays).
@@ -115,10 +116,11 @@ def mechanism_columns(states: LearnerState, cfg: Config) -> dict[str, list]:
         "start_value": (s.start_value / starts, s.starts),
     }
     out = {name: [float(v) if n else None for v, n in zip(*pair, strict=True)] for name, pair in columns.items()}
-    out["failure"] = [float(v) for v in np.asarray(states.env.curriculum.failure)]
+    # Measures of float32 state stay np.float32, so that the metrics row can write them at float32 precision.
+    out["failure"] = list(np.asarray(states.env.curriculum.failure, np.float32))
     for i, (kernel, _) in enumerate(network.dense_layers(states.agent.params), 1):
         kernel = np.asarray(kernel)
-        out[f"w{i}_norm"] = [float(v) for v in np.linalg.norm(kernel.reshape(len(kernel), -1), axis=1)]
+        out[f"w{i}_norm"] = list(np.linalg.norm(kernel.reshape(len(kernel), -1), axis=1).astype(np.float32))
     return out
 
 

@@ -1,7 +1,8 @@
 """Table-2 test protocol, Fig. 4-5 movements, after-effect and movement quality (section 4.4, model §8-10).
 
 `evaluate(run_dir)` (or `python -m reach_jax.evaluate RUN_DIR`) loads the newest checkpoint of a run and writes
-RUN_DIR/eval/: table2.json, table2.md, fig4.png, fig5.png, aftereffect.json, quality.json and learning_curves.png.
+RUN_DIR/eval/: table2.json, table2.md, fig4.png, fig5.png, aftereffect.json, quality.json and learning_curves.png;
+figures.json keeps the digest of each PNG's data, so that a figure is drawn again only when its data changed.
 
 Units: positions [m] in the shoulder frame, speeds [m/s], times [s], angles in the JSON files [deg]
 (directions measured counter-clockwise from +x), torques [N m]. Trial lengths are steps of cfg.arm.dt.
@@ -46,6 +47,7 @@ from reach_jax.evaluate.movement import (
 from reach_jax.evaluate.pulls import aftereffect, line_deviation, pool_aftereffect, pull_vectors
 from reach_jax.evaluate.run import (
     EVAL_DIR,
+    FIGURE_DIGESTS,
     RESULT_FILES,
     FigureData,
     Results,
@@ -58,6 +60,7 @@ from reach_jax.evaluate.verdicts import decide, impedance_cells
 
 __all__ = [
     "EVAL_DIR",
+    "FIGURE_DIGESTS",
     "RESULT_FILES",
     "FigureData",
     "Results",

@@ -7,6 +7,8 @@ again from the written files.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import io
 import json
 from pathlib import Path
 
@@ -24,6 +26,9 @@ from reach_jax.store.checkpoint import CheckpointError
 
 EVAL_DIR = "eval"
 RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "claims")  # each written as NAME.json
+# {PNG name: digest of the data it draws}, so that a figure whose data has not changed is neither drawn nor written
+FIGURE_DIGESTS = "figures.json"
+FIGURE_DPI = 110  # the PNGs' resolution
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,8 +203,60 @@ def redecide(run_dir: Path) -> dict:
     return result
 
 
+def _canonical(x):
+    """x as JSON data for a digest: an array as its dtype, shape and the SHA-256 of its bytes, a dataclass (the
+    config) as its fields, a tuple (NamedTuples included) as a list."""
+    if isinstance(x, np.ndarray | np.generic | jax.Array):
+        a = np.ascontiguousarray(x)
+        return {"dtype": a.dtype.str, "shape": a.shape, "sha256": hashlib.sha256(a.tobytes()).hexdigest()}
+    if dataclasses.is_dataclass(x):
+        return _canonical(dataclasses.asdict(x))
+    if isinstance(x, dict):
+        return {str(k): _canonical(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_canonical(v) for v in x]
+    return x
+
+
+def data_digest(*data) -> str:
+    """SHA-256 of the data a figure draws (arrays, JSON-like values, the config), equal exactly when the data are."""
+    return hashlib.sha256(json.dumps(_canonical(data), sort_keys=True).encode()).hexdigest()
+
+
+class Figures:
+    """Writes the PNGs of an evaluation into a folder, each drawn only when the data it draws have changed.
+
+    FIGURE_DIGESTS in the folder keeps each PNG's data digest; a PNG whose digest matches keeps its bytes and mtime.
+    """
+
+    def __init__(self, out: Path):
+        self.out, self.path = out, out / FIGURE_DIGESTS
+        try:
+            self.stored = json.loads(self.path.read_text())
+        except (OSError, json.JSONDecodeError):
+            self.stored = {}  # none yet, or unreadable: every figure is drawn
+        self.digests: dict[str, str] = {}
+
+    def draw(self, name: str, plot, *data) -> None:
+        """Write plot(*data) (a matplotlib Figure) as `name`, unless the PNG there drew the same data."""
+        digest = self.digests[name] = data_digest(*data)
+        if self.stored.get(name) == digest and (self.out / name).is_file():
+            return
+        buf = io.BytesIO()
+        plot(*data).savefig(buf, format="png", dpi=FIGURE_DPI)
+        files.atomic_write_bytes(self.out / name, buf.getvalue())
+
+    def close(self) -> None:
+        """Write FIGURE_DIGESTS, if it changed."""
+        if self.digests != self.stored:
+            files.atomic_write_bytes(self.path, json.dumps(self.digests, indent=2, sort_keys=True).encode())
+
+
 def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Path | None = None) -> Path:
-    """Write every file of the evaluation into `out` (default RUN_DIR/eval/); returns that directory."""
+    """Write every file of the evaluation into `out` (default RUN_DIR/eval/); returns that directory.
+
+    A figure is drawn and written only when its data changed since the last evaluation into `out` (`Figures`).
+    """
     cfg, res, fig = data.cfg, results.json, results.figures
     out = Path(run_dir) / EVAL_DIR if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -210,14 +267,16 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
     files.atomic_write_bytes(out / "table2.md", lattice.table2_markdown(res["table2"], recipes, source).encode())
     files.atomic_write_bytes(out / "claims.md", report.claims_markdown(res["claims"], source).encode())
     files.atomic_write_bytes(out / "quality.md", movement.quality_markdown(res["quality"], source).encode())
-    figures.impedance(res["impedance"], fig.gains, data.learners, cfg).savefig(out / "impedance.png", dpi=110)
-    paper_figures.fig4(fig.panels, fig.starts, fig.targets, fig.start_corner, cfg).savefig(out / "fig4.png", dpi=110)
-    paper_figures.fig5(fig.panels, fig.start_corner, cfg).savefig(out / "fig5.png", dpi=110)
-    figures.learning_curves(data.metrics, cfg).savefig(out / "learning_curves.png", dpi=110)
+    pngs = Figures(out)
+    pngs.draw("impedance.png", figures.impedance, res["impedance"], fig.gains, data.learners, cfg)
+    pngs.draw("fig4.png", paper_figures.fig4, fig.panels, fig.starts, fig.targets, fig.start_corner, cfg)
+    pngs.draw("fig5.png", paper_figures.fig5, fig.panels, fig.start_corner, cfg)
+    pngs.draw("learning_curves.png", figures.learning_curves, data.metrics, cfg)
     if res["adaptation"] is not None:
         files.atomic_write_bytes(out / "adaptation.json", json.dumps(res["adaptation"], indent=2).encode())
         files.atomic_write_bytes(out / "adaptation.md", adaptation.markdown(res["adaptation"], source).encode())
-        figures.adaptation(res["adaptation"], cfg).savefig(out / "adaptation.png", dpi=110)
+        pngs.draw("adaptation.png", figures.adaptation, res["adaptation"], cfg)
+    pngs.close()
     return out
 
 

@@ -1,5 +1,6 @@
-"""The store layer: run directories (one reader, one writer, held by a lock), checkpoints and durable file writes."""
+"""The store layer: run directories (one reader, one writer, held by a lock), their metrics log, checkpoints and
+durable file writes."""
 
-from reach_jax.store import checkpoint, files, run_dir, run_lock
+from reach_jax.store import checkpoint, files, metrics_log, run_dir, run_lock
 
-__all__ = ["checkpoint", "files", "run_dir", "run_lock"]
+__all__ = ["checkpoint", "files", "metrics_log", "run_dir", "run_lock"]

@@ -20,7 +20,8 @@ from reach_jax.errors import OneLineError
 from reach_jax.store.files import atomic_write_bytes
 
 CHECKPOINT_DIR = "checkpoints"
-KEEP = 2  # newest checkpoints kept on disk
+KEEP = 2  # newest checkpoints kept on disk while a run trains
+KEEP_FINISHED = 1  # newest checkpoints kept once it has finished: its final one
 
 
 class CheckpointError(OneLineError):
@@ -43,11 +44,7 @@ def checkpoint_path(run_dir: Path, chunk: int) -> Path:
 
 
 def save(run_dir: Path, chunk: int, tree, meta: dict, keep_every: int = 0) -> Path:
-    """Atomically write `tree` as the checkpoint after `chunk` chunks; prune old ones.
-
-    The newest KEEP checkpoints stay, and with keep_every > 0 so does every checkpoint whose chunk is a
-    multiple of keep_every (snapshots for looking back at a run).
-    """
+    """Atomically write `tree` as the checkpoint after `chunk` chunks; prune old ones (`prune`, the newest KEEP)."""
     folder = Path(run_dir) / CHECKPOINT_DIR
     folder.mkdir(parents=True, exist_ok=True)
     arrays = flatten(tree)
@@ -58,10 +55,16 @@ def save(run_dir: Path, chunk: int, tree, meta: dict, keep_every: int = 0) -> Pa
     np.savez(buf, **arrays)
     path = checkpoint_path(run_dir, chunk)
     atomic_write_bytes(path, buf.getvalue())
-    for old in list_checkpoints(run_dir)[:-KEEP]:
+    prune(run_dir, KEEP, keep_every)
+    return path
+
+
+def prune(run_dir: Path, keep: int, keep_every: int = 0) -> None:
+    """Remove all but the newest `keep` checkpoints, except, with keep_every > 0, every checkpoint whose chunk is a
+    multiple of keep_every (snapshots for looking back at a run)."""
+    for old in list_checkpoints(run_dir)[:-keep]:
         if not (keep_every and checkpoint_chunk(old) % keep_every == 0):
             old.unlink()
-    return path
 
 
 def checkpoint_chunk(path: Path) -> int:

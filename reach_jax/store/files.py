@@ -1,4 +1,4 @@
-"""Durable file writes for run directories and evaluations: whole files by rename, whole lines by append."""
+"""Durable file writes for run directories and evaluations: whole files by rename, whole lines or blocks by append."""
 
 from __future__ import annotations
 
@@ -30,9 +30,14 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     _fsync_dir(path.parent)
 
 
-def append_lines(path: Path, lines: list[str]) -> None:
-    """Append whole lines with a single write and fsync, so no line is torn."""
+def append_bytes(path: Path, data: bytes) -> None:
+    """Append data with a single write and fsync: a kill leaves at most a prefix of it, after every earlier append."""
     with open(path, "ab") as f:
-        f.write("".join(line + "\n" for line in lines).encode())
+        f.write(data)
         f.flush()
         os.fsync(f.fileno())
+
+
+def append_lines(path: Path, lines: list[str]) -> None:
+    """Append whole lines with a single write and fsync, so no line is torn."""
+    append_bytes(path, "".join(line + "\n" for line in lines).encode())

@@ -1,8 +1,9 @@
-"""Run directories: the one reader and writer of config.json, metrics.jsonl and the learners' checkpoints.
+"""Run directories: the one reader and writer of config.json, the metrics log and the learners' checkpoints.
 
-Layout of RUN_DIR: config.json (the whole Config), metrics.jsonl (one JSON object per learner per chunk,
-appended), checkpoints/chunk_NNNNNNN.npz (`checkpoint`), trials/ (the per-trial log, with train.trial_log_every)
-and eval/ (written by `evaluate`).
+Layout of RUN_DIR: config.json (the whole Config), metrics.jsonl.gz (one row per learner per chunk, appended one
+gzip member a chunk; runs begun before it keep their metrics.jsonl, one JSON object a line: `metrics_log`),
+checkpoints/chunk_NNNNNNN.npz (`checkpoint`), trials/ (the per-trial log, with train.trial_log_every) and eval/
+(written by `evaluate`).
 Every failure to read is a CheckpointError whose one-line message names the file and the field.
 """
 
@@ -18,15 +19,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from reach_jax.config import Config, compat, first_difference, from_dict, to_dict, to_json
+from reach_jax.config import Config, compat, first_difference, from_dict, hyper, to_dict, to_json
 from reach_jax.config.schema import DEFAULT_SPEED, SPEED_RESULT_FIELDS, Speed
 from reach_jax.engine import batch
 from reach_jax.env import trial_log
-from reach_jax.store import checkpoint, files
+from reach_jax.store import checkpoint, files, metrics_log
 from reach_jax.store.checkpoint import CheckpointError
 
 CONFIG_FILE = "config.json"
-METRICS_FILE = "metrics.jsonl"
+METRICS_FILE = "metrics.jsonl.gz"  # the metrics log of a run: gzip members, one per chunk (`metrics_log`)
+LEGACY_METRICS_FILE = "metrics.jsonl"  # the JSON lines of runs begun before METRICS_FILE: read, and resumed, as such
+# A learner's fixed columns in its metrics rows (its identity, its hyperparameters): once, in METRICS_FILE's header
+LEARNER_COLUMNS = ("condition", "seed", *hyper.NAMES)
 TRIALS_DIR = "trials"  # the per-trial log: one little-endian binary file per column, appended chunk by chunk
 TRIAL_KEYS = {"learner": "<i4", "trial": "<i4", "chunk": "<i4"}  # columns the shell adds to trial_log.COLUMNS
 
@@ -53,7 +57,8 @@ def create(run_dir: Path, cfg: Config) -> None:
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     files.atomic_write_bytes(run_dir / CONFIG_FILE, to_json(cfg).encode())
-    (run_dir / METRICS_FILE).unlink(missing_ok=True)
+    for name in (METRICS_FILE, LEGACY_METRICS_FILE):
+        (run_dir / name).unlink(missing_ok=True)
     for name in trial_columns():
         (run_dir / TRIALS_DIR / f"{name}.bin").unlink(missing_ok=True)
 
@@ -63,52 +68,44 @@ def holds_run(run_dir: Path) -> bool:
     return (Path(run_dir) / CONFIG_FILE).exists()
 
 
-def read_metrics(run_dir: Path, up_to_chunk: float = math.inf) -> list[dict]:
-    """Rows of metrics.jsonl up to a chunk ([] when the run has no finished chunk).
+def metrics_path(run_dir: Path) -> Path:
+    """The run's metrics log: its LEGACY_METRICS_FILE if it has one (a run begun before METRICS_FILE), else
+    METRICS_FILE."""
+    legacy = Path(run_dir) / LEGACY_METRICS_FILE
+    return legacy if legacy.exists() else Path(run_dir) / METRICS_FILE
 
-    Raises CheckpointError on a line that is not a JSON object.
+
+def read_metrics(run_dir: Path, up_to_chunk: float = math.inf) -> list[dict]:
+    """Rows of the metrics log up to a chunk ([] when the run has no finished chunk), in either form.
+
+    Raises CheckpointError, naming the file, on a line or member that cannot be read.
     """
-    path = Path(run_dir) / METRICS_FILE
+    path = metrics_path(run_dir)
     if not path.exists():
         return []
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CheckpointError(f"{path}: unreadable ({exc})") from None
-    rows = []
-    # An unterminated last line is an append still in flight (or cut by a kill): of a chunk past every checkpoint.
-    for n, line in enumerate(text.split("\n")[:-1], 1):
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            raise CheckpointError(f"{path}: line {n} is not valid JSON") from None
-        if not isinstance(row, dict):
-            raise CheckpointError(f"{path}: line {n} is not a JSON object")
-        if row.get("chunk", 0) <= up_to_chunk:
-            rows.append(row)
-    return rows
+    if path.name == LEGACY_METRICS_FILE:
+        return metrics_log.read_lines(path, up_to_chunk)
+    return metrics_log.read_members(path, up_to_chunk)
 
 
 def append_metrics(run_dir: Path, rows: list[dict]) -> None:
-    """Append one line per row to metrics.jsonl."""
-    files.append_lines(Path(run_dir) / METRICS_FILE, [json.dumps(r) for r in rows])
+    """Append a chunk's rows to the metrics log, in the form the run began with."""
+    path = metrics_path(run_dir)
+    if path.name == LEGACY_METRICS_FILE:
+        metrics_log.append_lines(path, rows)
+    else:
+        metrics_log.append_member(path, rows, LEARNER_COLUMNS)
 
 
 def truncate_metrics(run_dir: Path, chunk: int) -> None:
-    """Drop metrics lines past `chunk` (and any torn tail), atomically; a resumed run then appends after them."""
-    path = Path(run_dir) / METRICS_FILE
+    """Drop the metrics rows past `chunk` (and any torn tail), atomically; a resumed run then appends after them."""
+    path = metrics_path(run_dir)
     if not path.exists():
         return
-    keep = []
-    for line in path.read_text().splitlines():
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            break
-        if row.get("chunk", math.inf) > chunk:
-            break
-        keep.append(line)
-    files.atomic_write_bytes(path, "".join(x + "\n" for x in keep).encode())
+    if path.name == LEGACY_METRICS_FILE:
+        metrics_log.truncate_lines(path, chunk)
+    else:
+        metrics_log.truncate_members(path, chunk)
 
 
 def trial_columns() -> dict[str, str]:
@@ -230,7 +227,7 @@ class Run(NamedTuple):
     batch: batch.Batch
     chunk: int  # chunks trained at the checkpoint
     learners: list  # (condition, seed index) per learner, `batch.learner_table`
-    metrics: list  # metrics.jsonl rows up to `chunk`
+    metrics: list  # metrics rows up to `chunk` (`read_metrics`)
     trials: dict | None  # the per-trial log up to `chunk` (`read_trials`); None when the run keeps none
 
 

@@ -12,11 +12,16 @@ from reach_jax.engine import learner_state
 from reach_jax.env import trial_log
 
 
+def float32_value(x) -> float:
+    """x's float32 as the shortest decimal that reads back to it (0.2, not 0.20000000298023224)."""
+    return float(str(np.float32(x)))
+
+
 def hyper_values(hypers: hyper.Hyper) -> list[dict]:
     """Each learner's hyperparameters as JSON values, read from the batch's float32 columns.
 
-    A float is written as the shortest decimal that reads back to its float32 (0.2, not 0.20000000298023224:
-    the config's value wherever float32 holds it exactly enough); a count (`hyper.Hyperparameter.integer`) as an int.
+    A float is written as the shortest decimal that reads back to its float32 (`float32_value`: the config's value
+    wherever float32 holds it exactly enough); a count (`hyper.Hyperparameter.integer`) as an int.
 
     Args:
       hypers: hyper.Hyper of (L,) float32 arrays, batch order.
@@ -24,14 +29,14 @@ def hyper_values(hypers: hyper.Hyper) -> list[dict]:
     columns = {name: np.asarray(getattr(hypers, name), np.float32) for name in hyper.NAMES}
 
     def value(name: str, x: np.float32):
-        return int(x) if hyper.BY_NAME[name].integer else float(str(x))
+        return int(x) if hyper.BY_NAME[name].integer else float32_value(x)
 
     n_learners = len(columns[hyper.NAMES[0]])
     return [{name: value(name, columns[name][i]) for name in hyper.NAMES} for i in range(n_learners)]
 
 
 def metrics_rows(states: learner_state.LearnerState, hypers: hyper.Hyper, table, chunk: int, wall: float, cfg: Config):
-    """One metrics record (a dict) per learner for the chunk just run.
+    """One metrics record (a dict) per learner for the chunk just run; a float32 measure as `float32_value`.
 
     Args:
       states: every learner after the chunk, learner axis first (host arrays).
@@ -49,6 +54,10 @@ def metrics_rows(states: learner_state.LearnerState, hypers: hyper.Hyper, table,
     bound = np.asarray(exploration.schedule(hypers, states.env.trials, cur.full_at))
     mechanism = learner_state.mechanism_columns(states, cfg)
     rows = []
+
+    def measure(x):
+        return float32_value(x) if isinstance(x, np.float32) else x
+
     for i, ((cond, seed), values) in enumerate(zip(table, hyper_values(hypers), strict=True)):
         ended = int(s.trials[i])
 
@@ -72,11 +81,11 @@ def metrics_rows(states: learner_state.LearnerState, hypers: hyper.Hyper, table,
                 "drift_rate": per(s.drifted),
                 "mean_trial_steps": mean_steps,
                 "mean_trial_s": None if mean_steps is None else mean_steps * cfg.arm.dt,
-                "distance_m": float(distance[i]),
-                "n_max": float(n_max[i]),
-                "exploration": float(bound[i]),
+                "distance_m": float32_value(distance[i]),
+                "n_max": float32_value(n_max[i]),
+                "exploration": float32_value(bound[i]),
                 "block": int(block[i]),
-                **{name: column[i] for name, column in mechanism.items()},
+                **{name: measure(column[i]) for name, column in mechanism.items()},
                 "wall_s": round(wall, 3),
             }
         )

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from reach_jax.engine import batch
+from reach_jax.store import checkpoint
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train.core import Finished
 from reach_jax.train.metrics import status_line
@@ -35,14 +36,14 @@ class MetricsSink(Sink):
         self.run_dir = run_dir
 
     def chunk(self, done: Finished, rows: list[dict]) -> None:
-        """Append the chunk's rows to metrics.jsonl and its records to trials/."""
+        """Append the chunk's rows to the metrics log and its records to trials/."""
         run_dir_io.append_metrics(self.run_dir, rows)
         if done.records is not None:
             run_dir_io.append_trials(self.run_dir, done.records)
 
 
 class CheckpointSink(Sink):
-    """Writes a checkpoint after each chunk."""
+    """Writes a checkpoint after each chunk; once the run has finished, keeps its final one and its snapshots."""
 
     def __init__(self, prep: Prepared, group: batch.Batch):
         self.prep, self.group = prep, group
@@ -51,6 +52,10 @@ class CheckpointSink(Sink):
         """Save the learners after the chunk."""
         learners = self.group._replace(states=done.states)
         run_dir_io.write_checkpoint(self.prep.run_dir, done.index, learners, self.prep.cfg, self.prep.speed)
+
+    def close(self) -> None:
+        """Keep the final checkpoint and the snapshots: the second-newest was kept for safety while the run trained."""
+        checkpoint.prune(self.prep.run_dir, checkpoint.KEEP_FINISHED, self.prep.cfg.train.keep_every)
 
 
 class ProgressSink(Sink):

@@ -48,7 +48,7 @@ def bound_bin(b: float) -> str:
 
 def metrics_by_bound(run: Path) -> dict:
     """Per condition group and bound bin: chunks, crisis share and indicator medians after the first full field."""
-    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    rows = run_dir_io.read_metrics(run)
     full = max(r["distance_m"] for r in rows)
     by_learner = collections.defaultdict(list)
     for r in rows:
