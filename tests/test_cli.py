@@ -77,6 +77,23 @@ def test_list_hyper_prints_the_table_and_exits_0_writing_nothing(tmp_path, monke
     assert list(tmp_path.iterdir()) == []
 
 
+def test_describe_words_a_recipe_from_the_table_naming_only_what_is_set_and_on():
+    # Every entry has its words, and a part of a form is named only while that form is on.
+    assert all(h.words for h in hyper.TABLE)
+    assert all(h.part_of in hyper.BY_NAME and h.part_of != h.name for h in hyper.TABLE if h.part_of)
+    assert hyper.describe({}) == "bound 0.2"
+    # Float32 values, as a batch stores them, print as their float32 shortest.
+    label = {"noise": 0.2, "lr": 1.0, "noise_value_ratio": np.float32(0.5), "drift_gate": np.float32(0.3)}
+    assert hyper.describe(label) == "bound 0.2; ×0.5 near the goal; drift only above 0.3 recent failure"
+    off = {"noise": 0.1, "noise_anneal_trials": 100_000, "drift_gate_trials": 50, "n_max_clean": 1.0}
+    assert hyper.describe(off) == "bound 0.1; N_max from clean successes"
+    on = {**off, "noise_final_ratio": 0.5, "drift_gate": 0.2}
+    assert hyper.describe(on) == (
+        "bound 0.1; annealed to ×0.5; the anneal over 100,000 trials; drift only above 0.2 recent failure; "
+        "the failure share over 50 trials; N_max from clean successes"
+    )
+
+
 def test_sweep_with_one_value_sets_the_learners_default_and_with_several_sweeps_it():
     cfg = parsed("--sweep", "noise_value_ratio=0.5", "--sweep", "quiet_every=3")
     assert cfg == with_learner(noise_value_ratio=0.5, quiet_every=3)

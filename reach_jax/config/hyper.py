@@ -32,6 +32,8 @@ class Hyperparameter:
     switch: bool = False  # on/off: 0 or 1 (true or false on the command line), 1 = on; stored as a float
     neutral: float | None = None  # the value that switches an optional form off; a recipe label names it only
     # when another value is set. None: always named.
+    words: str = ""  # how a recipe's description names it, `{v}` its value (`describe`)
+    part_of: str | None = None  # the hyperparameter whose form this one shapes: described only while that one is on
 
     @property
     def grid(self) -> str:
@@ -79,28 +81,58 @@ class Hyperparameter:
 
 
 TABLE = (
-    Hyperparameter("lr", 1.0, "SGD learning rate on squared error (model §11 choice)", low_open=True),
-    Hyperparameter("noise", 0.2, "exploration bound b of rnd ~ U(-b, b) in actor units (model §11 choice)"),
-    Hyperparameter("lam", 0.999, "lambda of eq. 3 (model §11 choice)", low_open=True),
     Hyperparameter(
-        "noise_final_ratio", 1.0, "bound after the anneal as a fraction of noise; 1 = no anneal (model §5 choice)"
+        "lr", 1.0, "SGD learning rate on squared error (model §11 choice)", low_open=True, words="learning rate {v:g}"
     ),
     Hyperparameter(
-        "noise_anneal_delay", 0, "trials from the first full-field trial to the start of the anneal", integer=True
+        "noise", 0.2, "exploration bound b of rnd ~ U(-b, b) in actor units (model §11 choice)", words="bound {v:g}"
     ),
-    Hyperparameter("noise_anneal_trials", 300_000, "length of the linear anneal [trials]", integer=True),
+    Hyperparameter("lam", 0.999, "lambda of eq. 3 (model §11 choice)", low_open=True, words="λ {v:g}"),
+    Hyperparameter(
+        "noise_final_ratio",
+        1.0,
+        "bound after the anneal as a fraction of noise; 1 = no anneal (model §5 choice)",
+        words="annealed to ×{v:g}",
+    ),
+    Hyperparameter(
+        "noise_anneal_delay",
+        0,
+        "trials from the first full-field trial to the start of the anneal",
+        integer=True,
+        words="the anneal {v:,.0f} trials after the whole field",
+        part_of="noise_final_ratio",
+    ),
+    Hyperparameter(
+        "noise_anneal_trials",
+        300_000,
+        "length of the linear anneal [trials]",
+        integer=True,
+        words="the anneal over {v:,.0f} trials",
+        part_of="noise_final_ratio",
+    ),
     Hyperparameter(
         "noise_value_ratio",
         1.0,
         "smallest bound, where the critic expects the goal, as a fraction of the bound; 1 = off (model §5 choice)",
         high=1.0,
         neutral=1.0,
+        words="×{v:g} near the goal",
     ),
     Hyperparameter(
-        "noise_value_hi", 0.3, "critic value p at or above which the bound is smallest (model §5 choice)", neutral=0.3
+        "noise_value_hi",
+        0.3,
+        "critic value p at or above which the bound is smallest (model §5 choice)",
+        neutral=0.3,
+        words="smallest from p {v:g}",
+        part_of="noise_value_ratio",
     ),
     Hyperparameter(
-        "noise_value_lo", 0.0, "critic value p at or below which the bound is whole (model §5 choice)", neutral=0.0
+        "noise_value_lo",
+        0.0,
+        "critic value p at or below which the bound is whole (model §5 choice)",
+        neutral=0.0,
+        words="whole up to p {v:g}",
+        part_of="noise_value_ratio",
     ),
     Hyperparameter(
         "noise_value_after_full",
@@ -109,6 +141,8 @@ TABLE = (
         high=1.0,
         switch=True,
         neutral=0.0,
+        words="the value scaling once full",
+        part_of="noise_value_ratio",
     ),
     Hyperparameter(
         "noise_value_gate",
@@ -117,6 +151,8 @@ TABLE = (
         "0 = off (model §5 choice)",
         high=1.0,
         neutral=0.0,
+        words="the value scaling relaxed {v:.0%} short of the whole field",
+        part_of="noise_value_ratio",
     ),
     Hyperparameter(
         "noise_value_steps",
@@ -124,6 +160,8 @@ TABLE = (
         "steps into a trial from which the value scaling is off, the whole bound back; 0 = never (model §5 choice)",
         integer=True,
         neutral=0,
+        words="the whole bound from step {v:.0f} of a trial",
+        part_of="noise_value_ratio",
     ),
     Hyperparameter(
         "noise_corr",
@@ -132,6 +170,7 @@ TABLE = (
         high=1.0,
         high_open=True,
         neutral=0.0,
+        words="AR ρ {v:g}",
     ),
     Hyperparameter(
         "actor_baseline",
@@ -139,6 +178,7 @@ TABLE = (
         "share of P_range/N_max taken from dp in eq. 2's actor signal; 1 = the TD error (departs from eq. 2, model §5)",
         high=1.0,
         neutral=0.0,
+        words="actor baseline {v:g}",
     ),
     Hyperparameter(
         "actor_gain_power",
@@ -147,12 +187,14 @@ TABLE = (
         "(departs from eq. 2, model §5)",
         high=2.0,
         neutral=0.0,
+        words="actor gain ×s^-{v:g}",
     ),
     Hyperparameter(
         "actor_signal_gain",
         1.0,
         "g: eq. 2's actor signal multiplied by it, the critic's left as it is; 1 = eq. 2 (departs from it, model §5)",
         neutral=1.0,
+        words="actor-only gain {v:g}",
     ),
     Hyperparameter(
         "drift_neutral_early",
@@ -161,6 +203,7 @@ TABLE = (
         high=1.0,
         switch=True,
         neutral=0.0,
+        words="drift neutral from the start",
     ),
     Hyperparameter(
         "drift_gate",
@@ -169,6 +212,7 @@ TABLE = (
         "drifts (the paper's 'often fails', model §5)",
         high=1.0,
         neutral=0.0,
+        words="drift only above {v:g} recent failure",
     ),
     Hyperparameter(
         "drift_gate_trials",
@@ -177,6 +221,8 @@ TABLE = (
         low_open=True,
         integer=True,
         neutral=300,
+        words="the failure share over {v:.0f} trials",
+        part_of="drift_gate",
     ),
     Hyperparameter(
         "n_max_clean",
@@ -185,6 +231,7 @@ TABLE = (
         high=1.0,
         switch=True,
         neutral=0.0,
+        words="N_max from clean successes",
     ),
     Hyperparameter(
         "quiet_every",
@@ -192,6 +239,7 @@ TABLE = (
         "every n-th trial runs without exploration; 0 = never (model §5 choice)",
         integer=True,
         neutral=0,
+        words="quiet 1/{v:.0f}",
     ),
 )
 
@@ -253,3 +301,23 @@ def label(values: dict[str, float]) -> dict[str, float]:
     return {
         k: v for k, v in values.items() if BY_NAME[k].neutral is None or np.float32(v) != np.float32(BY_NAME[k].neutral)
     }
+
+
+def describe(values: dict[str, float]) -> str:
+    """A recipe in words: its bound, then each hyperparameter set away from its default (one that shapes another's
+    form only while that one is on), in table order.
+
+    Args:
+        values: hyperparameter name -> value, such as a recipe's label (`label`) in `eval/claims.json`.
+    """
+    words = [BY_NAME["noise"].words.format(v=values.get("noise", BY_NAME["noise"].default))]
+    for h in TABLE:
+        if h.name == "noise" or not _set(values, h) or (h.part_of and not _set(values, BY_NAME[h.part_of])):
+            continue
+        words.append(h.words.format(v=values[h.name]))
+    return "; ".join(words)
+
+
+def _set(values: dict[str, float], h: Hyperparameter) -> bool:
+    """Whether `values` sets h away from its default (at float32 precision, as a batch stores it)."""
+    return h.name in values and np.float32(values[h.name]) != np.float32(h.default)

@@ -22,6 +22,8 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 
+from reach_jax.config import hyper
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
@@ -31,44 +33,6 @@ FIELD_UNSTABLE = 15.9  # the viscous field's eigenvalue along its unstable axis 
 PAPER_NONE_VISCOUS = 0.548  # the paper's none -> viscous success per network (1139 of 2080)
 PAPER_FIELD_COST = 44.8  # the paper's success lost to an unexpected field by its no-field networks [points]
 FULL_TRIALS = 2_000_000  # a full-length run (the paper's trials per network); shorter ones are screens
-
-
-def describe(h: dict) -> str:
-    """A recipe's exploration in words; the label carries only the forms that are on (`hyper.label`)."""
-    noise, ratio = h["noise"], h["noise_final_ratio"]
-    if ratio == 1:
-        text = f"{noise:g}"
-    else:
-        start = f"{h['noise_anneal_delay'] / 1e3:g}k after" if h["noise_anneal_delay"] else "from"
-        text = f"{noise:g} → {noise * ratio:.2g} over {h['noise_anneal_trials'] / 1e6:g}M, {start} full"
-    if any(k.startswith("noise_value") for k in h):
-        r = h.get("noise_value_ratio", 1.0)
-        text += f"; ×{r:g} near the goal (p {h.get('noise_value_lo', 0.0):g}→{h.get('noise_value_hi', 0.3):g})"
-        if h.get("noise_value_after_full"):
-            text += " once full"
-        if h.get("noise_value_gate"):
-            text += f", whole below {1 - h['noise_value_gate']:.0%} of the field"
-        if h.get("noise_value_steps"):
-            text += f", whole from step {h['noise_value_steps']:g} of a trial"
-    if "noise_corr" in h:
-        text += f"; AR ρ {h['noise_corr']:g}"
-    if "quiet_every" in h:
-        text += f"; quiet 1/{h['quiet_every']:g}"
-    if "drift_neutral_early" in h:
-        text += "; drift neutral from the start"
-    if "actor_baseline" in h:
-        text += f"; actor baseline {h['actor_baseline']:g}"
-    if "actor_gain_power" in h:
-        text += f"; actor gain ×s^-{h['actor_gain_power']:g}"
-    if "actor_signal_gain" in h:
-        text += f"; actor-only gain {h['actor_signal_gain']:g}"
-    if "drift_gate" in h:
-        text += f"; drift only above {h['drift_gate']:g} recent failure"
-    if "drift_gate_trials" in h:
-        text += f"; failure share over {h['drift_gate_trials']:g} trials"
-    if "n_max_clean" in h:
-        text += "; N_max from clean successes"
-    return text
 
 
 def _mean(cell: dict | None, name: str) -> float | None:
@@ -96,7 +60,7 @@ def recipe_rows(run: Path) -> list[dict]:
             {
                 "run": str(run),
                 "recipe": k,
-                "exploration": describe(recipe["hypers"]),
+                "exploration": hyper.describe(recipe["hypers"]),
                 "networks": recipe["networks_per_condition"],
                 "damping": damping,
                 "none_viscous_success": _mean(cells.get(("none", "viscous")), "success"),

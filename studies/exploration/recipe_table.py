@@ -13,20 +13,11 @@ import json
 import sys
 from pathlib import Path
 
+from reach_jax.config import hyper
+
 SCRIPT = "studies/exploration/recipe_table.py"  # how its outputs name the command that made them
 
 SHORT = {"holds": "holds", "holds in part": "part", "does not hold": "no"}
-
-
-def describe(hypers: dict) -> str:
-    """A recipe in words: the exploration schedule (the other hyperparameters are the defaults)."""
-    noise, ratio = hypers["noise"], hypers["noise_final_ratio"]
-    if ratio == 1:
-        return f"constant {noise:g}"
-    start = f"{hypers['noise_anneal_delay'] / 1e3:g}k trials after" if hypers["noise_anneal_delay"] else "from"
-    return (
-        f"{noise:g} → {noise * ratio:.2g} over {hypers['noise_anneal_trials'] / 1e6:g}M trials, {start} the full field"
-    )
 
 
 def rows(run: Path) -> list[str]:
@@ -40,7 +31,7 @@ def rows(run: Path) -> list[str]:
         damping = {c["learning"]: c["damping_unstable"]["mean"] for c in recipe["impedance"] if c["test"] == "none"}
         none_field = next(c for c in recipe["cells"] if c["learning"] == "none" and c["test"] == "viscous")
         out.append(
-            f"| `{run}` | {describe(recipe['hypers'])} | {recipe['networks_per_condition']} | {data['chunk']} | "
+            f"| `{run}` | {hyper.describe(recipe['hypers'])} | {recipe['networks_per_condition']} | {data['chunk']} | "
             + " | ".join(verdicts.get(k, "–") for k in range(1, 6))
             + f" | {near}/8 | {stable} | {100 * none_field['success']['mean']:.0f}% / "
             f"{100 * none_field['out']['mean']:.0f}% | "
