@@ -1,0 +1,130 @@
+"""Runs side by side: one row per recipe of each evaluated run, read from its `eval/claims.json`.
+
+    python -m reach_jax.evaluate.compare RUN_DIR [RUN_DIR ...] [--json FILE]
+
+A row holds the recipe in words (`config.hyper.describe`), its networks per condition, the verdict of each claim,
+the Table-2 cells near the paper's, the learners that stayed at the whole field late in training, the unexpected
+field's cell (no-field networks tested in the viscous field) and the learned hand damping along the field's
+unstable axis without the field, per learning condition. Nothing is recomputed: the rows are the run's own
+evaluation, so runs evaluated by any version of the code compare as they were decided.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from reach_jax.config import hyper
+from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line
+
+CLAIMS = "eval/claims.json"  # each run's decided claims, written by `python -m reach_jax.evaluate`
+CONDITIONS = ("none", "viscous", "random", "random_nopast")  # the learning conditions, in the paper's order
+SHORT = {"holds": "holds", "holds in part": "part", "does not hold": "no"}  # a verdict in a table cell
+
+
+def recipe_rows(run_dir: Path) -> list[dict]:
+    """One record per recipe of an evaluated run; raises FileNotFoundError without `eval/claims.json`.
+
+    Args:
+        run_dir: a run directory that `python -m reach_jax.evaluate` has evaluated.
+
+    Returns:
+        Records with the run, the recipe's index and words, `networks`, `chunk`, `verdicts` (claim number ->
+        verdict), `cells_near` of `cells`, `stable` of `judged` learners (None: none judged yet),
+        `none_viscous` (mean success and out per network, fractions) and `damping` (learning condition -> mean
+        damping along the field's unstable axis [N s/m]).
+    """
+    data = json.loads((Path(run_dir) / CLAIMS).read_text())
+    rows = []
+    for k, recipe in enumerate(data["recipes"]):
+        judged = [p for p in recipe["curriculum"]["learners"] if p["tail_chunks"]]
+        field = next((c for c in recipe["cells"] if (c["learning"], c["test"]) == ("none", "viscous")), None)
+        rows.append(
+            {
+                "run": str(run_dir),
+                "recipe": k,
+                "words": hyper.describe(recipe["hypers"]),
+                "networks": recipe["networks_per_condition"],
+                "chunk": data["chunk"],
+                "verdicts": {c["claim"]: c["verdict"] for c in recipe["claims"]},
+                "cells_near": sum(bool(c["near_paper"]) and all(c["near_paper"].values()) for c in recipe["cells"]),
+                "cells": len(recipe["cells"]),
+                "stable": sum(p["stable"] for p in judged) if judged else None,
+                "judged": len(judged),
+                "none_viscous": None
+                if field is None
+                else {"success": field["success"]["mean"], "out": field["out"]["mean"]},
+                "damping": {
+                    c["learning"]: c["damping_unstable"]["mean"] for c in recipe["impedance"] if c["test"] == "none"
+                },
+            }
+        )
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    """The records of `recipe_rows` as one Markdown table, with a line that says how to read it."""
+    lines = [
+        "Claims: holds / part (holds in part) / no. Near: Table-2 cells within the target. Stable: of the learners "
+        "in their last 20% of trials, those that stayed at the whole field. none → viscous: mean success / out per "
+        "network (paper 55% / 45%). Damping: mean learned hand damping along the field's unstable axis, no field, "
+        "N s/m, per learning condition (none / viscous / random / random_nopast; the field's eigenvalue there is "
+        "+15.9).",
+        "",
+        "| run | recipe | exploration | seeds | chunk | 1 | 2 | 3 | 4 | 5 | near | stable | none → viscous | damping |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        verdicts = " | ".join(SHORT[r["verdicts"][k]] if k in r["verdicts"] else "–" for k in range(1, 6))
+        stable = "not yet judged" if r["stable"] is None else f"{r['stable']}/{r['judged']}"
+        field = r["none_viscous"]
+        field = "–" if field is None else f"{100 * field['success']:.0f}% / {100 * field['out']:.0f}%"
+        damping = " / ".join(f"{r['damping'][c]:.0f}" for c in CONDITIONS if c in r["damping"])
+        lines.append(
+            f"| `{r['run']}` | {r['recipe']} | {r['words']} | {r['networks']} | {r['chunk']} | {verdicts} | "
+            f"{r['cells_near']}/{r['cells']} | {stable} | {field} | {damping} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The command-line interface of `python -m reach_jax.evaluate.compare`."""
+    p = Parser(prog="python -m reach_jax.evaluate.compare", description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR", help="evaluated run directories")
+    p.add_argument("--json", type=Path, metavar="FILE", help="also write the rows as JSON to FILE")
+    return p
+
+
+def main(argv=None) -> int:
+    """`python -m reach_jax.evaluate.compare`: the table on stdout; returns the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        missing = [str(r) for r in args.runs if not (r / CLAIMS).is_file()]
+        if missing:
+            raise UsageError(f"no {CLAIMS} in {', '.join(missing)} (run python -m reach_jax.evaluate RUN_DIR first)")
+        rows = []
+        for run in args.runs:
+            try:
+                rows += recipe_rows(run)
+            except (ValueError, KeyError, TypeError) as exc:  # not JSON, or not the evaluation's
+                raise UsageError(f"{run / CLAIMS} cannot be read: {type(exc).__name__}: {exc}") from None
+    except UsageError as exc:
+        sys.stderr.write(error_line(parser.prog, str(exc)))
+        return EXIT_USAGE
+    if args.json:
+        try:
+            args.json.write_text(json.dumps(rows, indent=1) + "\n")
+        except OSError as exc:
+            sys.stderr.write(error_line(parser.prog, f"{args.json}: write failed ({exc})"))
+            return EXIT_IO
+    words = " ".join(str(r) for r in args.runs)
+    sys.stdout.write(f"Generated by `python -m reach_jax.evaluate.compare {words}` from each run's `{CLAIMS}`.\n")
+    sys.stdout.write(markdown(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
