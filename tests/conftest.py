@@ -1,12 +1,16 @@
 """Test-session setup: the CPU compiler options that the command lines set, before JAX starts; shared fixtures."""
 
 import importlib.util
+import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -104,8 +108,32 @@ def load_tool():
 
 
 def pytest_configure(config):
-    """Give the test process (and the subprocesses it starts, which inherit XLA_FLAGS) the CLIs' backend flags."""
+    """Give the test process (and the subprocesses it starts, which inherit XLA_FLAGS) the CLIs' backend flags, and
+    one compilation cache."""
     distribute.add_xla_flags()
+    _share_compilations(config)
+
+
+# Every compiled program is kept, however small or quick: most of the suite's time is compiling the same small runs.
+CACHE_SETTINGS = {"jax_persistent_cache_min_compile_time_secs": 0.0, "jax_persistent_cache_min_entry_size_bytes": 0}
+
+
+def _share_compilations(config) -> None:
+    """One XLA compilation cache for the session and every process it starts, removed at its end.
+
+    Many tests compile the same program (the same small run trained in-process, in subprocesses and across
+    processes); with the cache each is compiled once. It stores executables only: every test still runs its own.
+    A cache already set (JAX_COMPILATION_CACHE_DIR) is used as it is.
+    """
+    if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+        return
+    folder = tempfile.mkdtemp(prefix="reach_jax-tests-xla-")
+    config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = folder
+    os.environ.update({name.upper(): str(value) for name, value in CACHE_SETTINGS.items()})
+    jax.config.update("jax_compilation_cache_dir", folder)
+    for name, value in CACHE_SETTINGS.items():
+        jax.config.update(name, value)
 
 
 def default_hyper(cfg) -> hyper.Hyper:
