@@ -27,14 +27,13 @@ SHORT = {"holds": "holds", "holds in part": "part", "does not hold": "no"}  # a 
 def recipe_rows(run_dir: Path) -> list[dict]:
     """One record per recipe of an evaluated run; raises FileNotFoundError without `eval/claims.json`.
 
+    A record holds the run, the recipe's index and words, `networks`, `chunk`, `verdicts` (claim number ->
+    verdict), `cells_near` of `cells`, `stable` of `judged` learners (None: none judged yet), `none_viscous` (mean
+    success and out per network, fractions) and `damping` (learning condition -> mean damping along the field's
+    unstable axis [N s/m]).
+
     Args:
         run_dir: a run directory that `python -m reach_jax.evaluate` has evaluated.
-
-    Returns:
-        Records with the run, the recipe's index and words, `networks`, `chunk`, `verdicts` (claim number ->
-        verdict), `cells_near` of `cells`, `stable` of `judged` learners (None: none judged yet),
-        `none_viscous` (mean success and out per network, fractions) and `damping` (learning condition -> mean
-        damping along the field's unstable axis [N s/m]).
     """
     data = json.loads((Path(run_dir) / CLAIMS).read_text())
     rows = []
