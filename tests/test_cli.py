@@ -17,6 +17,7 @@ from conftest import final_arrays, snapshot
 from reach_jax import errors
 from reach_jax.config import Config, LearnerConfig, TrainConfig, hyper
 from reach_jax.engine import batch
+from reach_jax.store import checkpoint
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import arguments
 from reach_jax.train import cli as train_cli
@@ -216,12 +217,15 @@ def readme_command(run: str) -> list[str]:
 
 @pytest.mark.parametrize("run", RUNS)
 def test_the_committed_runs_resume_bare_and_with_their_readmes_command(run, monkeypatch):
-    # Their config.json may hold one-value grids (written before --sweep); their READMEs spell the new flags.
+    # Their config.json may hold one-value grids (written before --sweep); their READMEs spell the new flags. Each
+    # resumes from its newest checkpoint.
     monkeypatch.chdir(ROOT)
-    assert {"table2", "heldout", "heldout_round2"} <= set(RUNS)
+    assert {"table2", "heldout", "heldout_round2"} <= set(RUNS) and len(RUNS) > 10
+    newest = checkpoint.checkpoint_chunk(checkpoint.list_checkpoints(f"runs/{run}")[-1])
     for argv in ([], readme_command(run)):
         inv = train_cli.parse(["--resume", f"runs/{run}", *argv])
         assert inv.prepared.resume and inv.cfg == run_dir_io.read_config(f"runs/{run}"), argv
+        assert inv.prepared.chunk == newest, argv
 
 
 @pytest.mark.slow

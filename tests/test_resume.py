@@ -228,16 +228,6 @@ def test_metrics_past_the_checkpoint_and_a_torn_gzip_member_are_dropped_on_resum
     assert path.read_bytes() == good
 
 
-@pytest.mark.slow
-def test_every_committed_run_validates_for_resume():
-    root = Path(__file__).resolve().parent.parent / "runs"
-    runs = sorted(p.parent for p in root.glob(f"*/{run_dir_io.CONFIG_FILE}"))
-    assert len(runs) > 10
-    for run in runs:
-        invocation = train_cli.parse(["--resume", str(run)])
-        assert invocation.prepared.chunk == checkpoint.checkpoint_chunk(checkpoint.list_checkpoints(run)[-1]), run
-
-
 def test_corrupt_truncated_and_wrong_version_checkpoints_are_refused(uninterrupted, tmp_path, capsys):
     def broken_copy(name):
         dst = copy_run(uninterrupted, tmp_path / name)
