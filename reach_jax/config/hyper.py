@@ -2,8 +2,8 @@
 
 An entry of `TABLE` is the whole of a hyperparameter. From it come the field of `config.LearnerConfig` that holds
 its default, the `config.TrainConfig` grid that sweeps it (`<name>_grid`), its range check, the field of the
-per-learner `Hyper` arrays the compiled step reads, how the command line's `--sweep NAME=V[,V...]` reads it and its
-place in a recipe's label.
+per-learner `Hyper` arrays the compiled step reads, how the command line's `--sweep NAME=V[,V...]` reads it, its
+place in a recipe's label and its words in a recipe's description (`describe`).
 """
 
 from __future__ import annotations
