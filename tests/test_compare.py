@@ -57,3 +57,15 @@ def test_a_run_it_cannot_read_is_one_line_and_exit_2(tmp_path, capsys, bad):
     assert err.out == "" and len(err.err.strip().splitlines()) == 1
     assert err.err.startswith("python -m reach_jax.evaluate.compare: error:") and str(run) in err.err
     assert not (tmp_path / "rows.json").exists()
+
+
+def test_the_cells_near_the_paper_are_counted_over_the_cells_it_has(tmp_path):
+    # A condition of one's own (a curl field, say) adds cells that the paper has no numbers for.
+    data = json.loads((RUNS[0] / compare.CLAIMS).read_text())
+    cells = data["recipes"][0]["cells"]
+    want = compare.recipe_rows(RUNS[0])[0]
+    cells.append({**cells[0], "learning": "curl", "test": "curl", "paper": None, "near_paper": {}})
+    (tmp_path / "eval").mkdir()
+    (tmp_path / compare.CLAIMS).write_text(json.dumps(data))
+    got = compare.recipe_rows(tmp_path)[0]
+    assert (got["cells_near"], got["cells"]) == (want["cells_near"], want["cells"]) == (3, 8)

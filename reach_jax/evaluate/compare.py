@@ -18,6 +18,7 @@ from pathlib import Path
 
 from reach_jax.config import hyper
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line
+from reach_jax.evaluate import report
 
 CLAIMS = "eval/claims.json"  # each run's decided claims, written by `python -m reach_jax.evaluate`
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # the learning conditions, in the paper's order
@@ -28,9 +29,9 @@ def recipe_rows(run_dir: Path) -> list[dict]:
     """One record per recipe of an evaluated run; raises FileNotFoundError without `eval/claims.json`.
 
     A record holds the run, the recipe's index and words, `networks`, `chunk`, `verdicts` (claim number ->
-    verdict), `cells_near` of `cells`, `stable` of `judged` learners (None: none judged yet), `none_viscous` (mean
-    success and out per network, fractions) and `damping` (learning condition -> mean damping along the field's
-    unstable axis [N s/m]).
+    verdict), `cells_near` of the `cells` the paper has, `stable` of `judged` learners (None: none judged yet),
+    `none_viscous` (mean success and out per network, fractions) and `damping` (learning condition -> mean damping
+    along the field's unstable axis [N s/m]).
 
     Args:
         run_dir: a run directory that `python -m reach_jax.evaluate` has evaluated.
@@ -39,6 +40,7 @@ def recipe_rows(run_dir: Path) -> list[dict]:
     rows = []
     for k, recipe in enumerate(data["recipes"]):
         judged = [p for p in recipe["curriculum"]["learners"] if p["tail_chunks"]]
+        judged_cells, near = report.paper_cells(recipe["cells"])
         field = next((c for c in recipe["cells"] if (c["learning"], c["test"]) == ("none", "viscous")), None)
         rows.append(
             {
@@ -48,8 +50,8 @@ def recipe_rows(run_dir: Path) -> list[dict]:
                 "networks": recipe["networks_per_condition"],
                 "chunk": data["chunk"],
                 "verdicts": {c["claim"]: c["verdict"] for c in recipe["claims"]},
-                "cells_near": sum(bool(c["near_paper"]) and all(c["near_paper"].values()) for c in recipe["cells"]),
-                "cells": len(recipe["cells"]),
+                "cells_near": len(near),
+                "cells": len(judged_cells),
                 "stable": sum(p["stable"] for p in judged) if judged else None,
                 "judged": len(judged),
                 "none_viscous": None

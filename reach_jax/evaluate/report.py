@@ -6,6 +6,16 @@ Units as in `claims`: success and out in percentage points, times [s], damping [
 from __future__ import annotations
 
 
+def paper_cells(cells: list[dict]) -> tuple[list[dict], list[dict]]:
+    """A recipe's Table-2 cells (its `claims.json` entries) that the paper has, and of those the ones near it.
+
+    Args:
+        cells: the recipe's `cells` in `eval/claims.json`; `near_paper` is empty for a cell the paper lacks.
+    """
+    judged = [cell for cell in cells if cell["near_paper"]]
+    return judged, [cell for cell in judged if all(cell["near_paper"].values())]
+
+
 def _fmt(name: str, value) -> str:
     """One number of a claim in words: intervals as "mean [low, high]" in the unit its name implies."""
     if isinstance(value, dict) and "mean" in value:
@@ -65,8 +75,7 @@ def claims_markdown(result: dict, source: str) -> str:
                 f"| {c['claim']}. {c['statement']} | {c['test']} | {'; '.join(ours)} | {'; '.join(paper)} | "
                 f"**{c['verdict']}**: {c['why']} |"
             )
-        judged = [cell for cell in recipe["cells"] if cell["near_paper"]]  # the cells the paper has
-        near = [cell for cell in judged if all(cell["near_paper"].values())]
+        judged, near = paper_cells(recipe["cells"])
         cur = recipe["curriculum"]
         unstable = [p["learner"] for p in cur["learners"] if p["tail_chunks"] and not p["stable"]]
         lines += [
