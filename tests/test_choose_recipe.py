@@ -84,3 +84,14 @@ def test_step_three_compares_the_heldout_run_with_the_default_record(tool, tmp_p
     assert result["beats_default"] is False  # more cells near the paper do not outweigh a claim that holds
     assert "does not beat the default" in out.with_suffix(".md").read_text()
     assert Path(result["ranked"][0]["run"]) == dev
+
+
+def test_the_heading_names_the_round_that_asked(tool, tmp_path, monkeypatch):
+    dev = _run(tmp_path, "dev", verdicts=("holds in part",) * 5)
+    out = tmp_path / "choice"
+    title = "The third round's choice of recipe"
+    argv = ["choose_recipe", str(dev), "--default", str(dev), "--out", str(out), "--title", title]
+    monkeypatch.setattr("sys.argv", argv)
+    tool.main()
+    text = out.with_suffix(".md").read_text()
+    assert text.startswith(f"**{title}**\n") and f"--title '{title}'" in text
