@@ -94,4 +94,4 @@ def test_the_heading_names_the_round_that_asked(tool, tmp_path, monkeypatch):
     monkeypatch.setattr("sys.argv", argv)
     tool.main()
     text = out.with_suffix(".md").read_text()
-    assert text.startswith(f"**{title}**\n") and f"--title '{title}'" in text
+    assert text.startswith(f"**{title}**\n") and f'--title "{title}"' in text

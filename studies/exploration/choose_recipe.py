@@ -145,7 +145,7 @@ def main() -> None:
     heldout = recipe_records(args.heldout)[0] if args.heldout else None
     command = f"python {SCRIPT} " + " ".join(map(str, args.runs)) + f" --default {args.default}"
     command += f" --heldout {args.heldout}" if args.heldout else ""
-    command += f" --out {args.out}" + (f" --title '{args.title}'" if args.title != TITLE else "")
+    command += f" --out {args.out}" + (f' --title "{args.title}"' if args.title != TITLE else "")
     text = markdown(ranked, default, heldout, command, args.title)
     result = {
         "ranked": ranked,
