@@ -96,3 +96,24 @@ def test_learning_curves_draw_one_line_per_learner_in_every_panel():
 def test_learning_curves_without_metrics_say_so():
     fig = figures.learning_curves([], CFG)
     assert any("no finished chunk" in t.get_text() for t in fig.axes[0].texts)
+
+
+def test_the_learning_curves_legend_names_each_label_once_and_only_conditions_in_a_large_batch():
+    def rows(n_learners):
+        return [
+            {
+                "learner": i,
+                "condition": ("none", "viscous")[i % 2],
+                "seed": i // 2 % 2,
+                "trials": 100,
+                "success_rate": 1.0,
+            }
+            for i in range(n_learners)
+        ]
+
+    small = figures.learning_curves(rows(6), CFG).legends[0]  # seeds 0 and 1 repeat, as in a sweep of 3 points
+    assert sorted(t.get_text() for t in small.get_texts()) == [
+        f"{c} seed {s}" for c in ("none", "viscous") for s in (0, 1)
+    ]
+    large = figures.learning_curves(rows(figures.MAX_LEGEND_LEARNERS + 2), CFG).legends[0]
+    assert [t.get_text() for t in large.get_texts()] == ["none", "viscous"]

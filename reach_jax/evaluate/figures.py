@@ -14,6 +14,8 @@ from reach_jax.config import Config
 # Colours of the conditions, in the order of cfg.conditions (the paper's four first), then round again.
 PALETTE = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive")
 SEED_STYLE = ("-", "--", ":", "-.")
+MAX_LEGEND_LEARNERS = 16  # past this many learners the learning curves' legend names the conditions only
+LEGEND_COLUMNS = 4
 
 
 def condition_color(name: str, cfg: Config) -> str:
@@ -39,15 +41,18 @@ LEARNING_CURVES = (
 
 
 def learning_curves(metrics: list[dict], cfg: Config):
-    """Per-chunk metrics against trials, one line per learner.
+    """Per-chunk metrics against trials, one line per learner, under a legend of each learner's condition and seed
+    (of the conditions alone past MAX_LEGEND_LEARNERS learners).
 
     Args:
       metrics: rows of metrics.jsonl (keys learner, condition, seed, trials and LEARNING_CURVES fields).
       cfg: model config.
     """
-    fig = Figure(figsize=(8, 2.2 * len(LEARNING_CURVES)))
+    height = 2.2 * len(LEARNING_CURVES)  # [in]
+    fig = Figure(figsize=(8, height))
     axes = fig.subplots(len(LEARNING_CURVES), 1, sharex=True)
     learners = sorted({(r["learner"], r["condition"], r["seed"]) for r in metrics})
+    by_seed = len(learners) <= MAX_LEGEND_LEARNERS
     for ax, (key, label) in zip(axes, LEARNING_CURVES, strict=True):
         for learner, cond, seed in learners:
             rows = [r for r in metrics if r["learner"] == learner and r.get(key) is not None]
@@ -59,17 +64,31 @@ def learning_curves(metrics: list[dict], cfg: Config):
                 lw=1.0,
                 marker=".",  # a run with a single chunk still shows its one point
                 markersize=4,
-                label=f"{cond} seed {seed}",
+                label=f"{cond} seed {seed}" if by_seed else cond,
             )
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
+    top = 1.0 - 0.75 / height  # below the title
     if learners:
-        axes[0].legend(fontsize=8, ncol=2)
+        # One entry per label (a sweep repeats each seed's label once per recipe), above the panels.
+        entries: dict = {}
+        handles, names = axes[0].get_legend_handles_labels()
+        for handle, name in zip(handles, names, strict=True):
+            entries.setdefault(name, handle)
+        fig.legend(
+            list(entries.values()),
+            list(entries),
+            loc="upper center",
+            bbox_to_anchor=(0.5, top),
+            ncol=LEGEND_COLUMNS,
+            fontsize=8,
+        )
+        top -= (0.1 + 0.17 * -(-len(entries) // LEGEND_COLUMNS)) / height
     else:
         axes[0].text(0.5, 0.5, "no finished chunk in metrics.jsonl", transform=axes[0].transAxes, ha="center")
     axes[-1].set_xlabel("trials per learner")
     fig.suptitle(f"Learning curves ({cfg.train.trials:,} trials planned per learner)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
     return fig
 
 
