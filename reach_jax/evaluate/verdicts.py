@@ -68,6 +68,18 @@ def decide(
     return verdicts
 
 
+def tail_rows(rows: list[dict], trials: int, tail: float) -> list[dict]:
+    """A learner's metrics rows that the stability verdict judges: chunks that ended a trial, in the last `tail`
+    of its `trials`.
+
+    Args:
+        rows: one learner's rows of metrics.jsonl, in chunk order.
+        trials: trials planned per learner.
+        tail: the judged fraction of them (cfg.claims.curriculum_tail).
+    """
+    return [r for r in rows if r["chunk_trials"] > 0 and r["trials"] > (1.0 - tail) * trials]
+
+
 def curriculum_stability(metrics: list[dict], learners: list[int], trials: int, cfg: Config) -> dict:
     """Setbacks of the curriculum in the last cfg.claims.curriculum_tail of each learner's trials.
 
@@ -78,11 +90,7 @@ def curriculum_stability(metrics: list[dict], learners: list[int], trials: int, 
     full = cfg.sensor.n_cells * cfg.sensor.cell_size
     per = []
     for i in learners:
-        rows = [
-            r
-            for r in metrics
-            if r["learner"] == i and r["chunk_trials"] > 0 and r["trials"] > (1.0 - c.curriculum_tail) * trials
-        ]
+        rows = tail_rows([r for r in metrics if r["learner"] == i], trials, c.curriculum_tail)
         setbacks = sum(r["distance_m"] < c.curriculum_min_fraction * full for r in rows)
         fraction = setbacks / len(rows) if rows else None
         per.append(
