@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import io
+
 import matplotlib.image
 import numpy as np
+from PIL import Image
 
 from reach_jax import evaluate
 from reach_jax.config import Config
@@ -117,3 +120,21 @@ def test_the_learning_curves_legend_names_each_label_once_and_only_conditions_in
     ]
     large = figures.learning_curves(rows(figures.MAX_LEGEND_LEARNERS + 2), CFG).legends[0]
     assert [t.get_text() for t in large.get_texts()] == ["none", "viscous"]
+
+
+def test_a_figure_is_written_as_a_palette_png_that_looks_like_its_full_colour_render():
+    # Fig. 4: coloured paths, gray goal squares and anti-aliased text, the kind of image every PNG here is.
+    ep, starts, targets, corner = corner_episodes()
+    fig = paper_figures.fig4({"a": ep, "b": ep}, starts, targets, corner, CFG)
+    full = io.BytesIO()
+    fig.savefig(full, format="png", dpi=figures.FIGURE_DPI)
+    want = np.asarray(Image.open(full).convert("RGB"), dtype=np.int16)
+    png = figures.png_bytes(fig)
+    with Image.open(io.BytesIO(png)) as image:
+        assert image.mode == "P" and len(image.getcolors(maxcolors=256)) <= figures.FIGURE_COLORS
+        got = np.asarray(image.convert("RGB"), dtype=np.int16)
+    assert got.shape == want.shape
+    error = np.abs(got - want)
+    # The palette keeps the picture: most pixels exact, the blends within a few levels of 255.
+    assert np.mean(error) < 1.0 and np.mean(np.max(error, axis=-1) > 24) < 0.01, (error.mean(), error.max())
+    assert len(png) < len(full.getvalue()) / 2

@@ -6,8 +6,11 @@ Every function returns a matplotlib Figure (not registered with pyplot, so nothi
 
 from __future__ import annotations
 
+import io
+
 import numpy as np
 from matplotlib.figure import Figure
+from PIL import Image
 
 from reach_jax.config import Config
 
@@ -16,6 +19,27 @@ PALETTE = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:
 SEED_STYLE = ("-", "--", ":", "-.")
 MAX_LEGEND_LEARNERS = 16  # past this many learners the learning curves' legend names the conditions only
 LEGEND_COLUMNS = 4
+FIGURE_DPI = 110  # the PNGs' resolution
+# A PNG's palette: a plot's few colours and their anti-aliased blends fit in 256, at a third of an RGBA PNG's bytes
+# (committed evaluations are most of what a run adds to the repository).
+FIGURE_COLORS = 256
+
+
+def png_bytes(fig: Figure, dpi: int = FIGURE_DPI, colors: int = FIGURE_COLORS) -> bytes:
+    """A figure as an 8-bit palette PNG: rendered opaque at `dpi`, then reduced to an adaptive `colors`-colour palette.
+
+    Args:
+      fig: a figure on an opaque background (every figure here: matplotlib's white).
+      dpi: dots per inch.
+      colors: palette size, at most 256.
+    """
+    rendered = io.BytesIO()
+    fig.savefig(rendered, format="png", dpi=dpi)
+    with Image.open(rendered) as image:
+        palette = image.convert("RGB").quantize(colors=colors, method=Image.Quantize.MEDIANCUT)
+    out = io.BytesIO()
+    palette.save(out, format="PNG", optimize=True)
+    return out.getvalue()
 
 
 def condition_color(name: str, cfg: Config) -> str:

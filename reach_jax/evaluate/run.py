@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import io
 import json
 from pathlib import Path
 
@@ -28,7 +27,6 @@ EVAL_DIR = "eval"
 RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "claims")  # each written as NAME.json
 # {PNG name: digest of the data it draws}, so that a figure whose data has not changed is neither drawn nor written
 FIGURE_DIGESTS = "figures.json"
-FIGURE_DPI = 110  # the PNGs' resolution
 
 
 @dataclasses.dataclass(frozen=True)
@@ -242,9 +240,7 @@ class Figures:
         digest = self.digests[name] = data_digest(*data)
         if self.stored.get(name) == digest and (self.out / name).is_file():
             return
-        buf = io.BytesIO()
-        plot(*data).savefig(buf, format="png", dpi=FIGURE_DPI)
-        files.atomic_write_bytes(self.out / name, buf.getvalue())
+        files.atomic_write_bytes(self.out / name, figures.png_bytes(plot(*data)))
 
     def close(self) -> None:
         """Write FIGURE_DIGESTS, if it changed."""
