@@ -23,6 +23,7 @@ import matplotlib
 import numpy as np
 
 from reach_jax.config import hyper
+from reach_jax.evaluate import figures
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -287,7 +288,7 @@ def main() -> None:
     text = markdown(rows, networks, command)
     args.out.with_suffix(".md").write_text(text)
     args.out.with_suffix(".json").write_text(json.dumps({"recipes": rows, "networks": networks}, indent=1) + "\n")
-    figure(rows, networks).savefig(args.out.with_suffix(".png"), dpi=110)
+    args.out.with_suffix(".png").write_bytes(figures.png_bytes(figure(rows, networks)))
     print(text)
 
 
