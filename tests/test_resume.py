@@ -155,7 +155,7 @@ def test_a_resume_under_another_sparse_layer1_is_refused_and_an_unstored_one_mea
     assert_resumes_to(uninterrupted, out)
 
 
-def test_a_resume_reads_its_checkpoint_once_and_builds_one_batch(uninterrupted, tmp_path, monkeypatch):
+def test_a_resume_reads_its_checkpoint_once_and_builds_no_fresh_batch(uninterrupted, tmp_path, monkeypatch):
     out, _ = older_copy(uninterrupted, tmp_path)
     calls = {"load": 0, "init_batch": 0}
 
@@ -169,7 +169,7 @@ def test_a_resume_reads_its_checkpoint_once_and_builds_one_batch(uninterrupted, 
     monkeypatch.setattr(checkpoint, "load", counted("load", checkpoint.load))
     monkeypatch.setattr(batch, "init_batch", counted("init_batch", batch.init_batch))
     assert_resumes_to(uninterrupted, out)  # validation, then training, of a run with a chunk left
-    assert calls == {"load": 1, "init_batch": 1}
+    assert calls == {"load": 1, "init_batch": 0}  # the checkpoint gives every state; its shapes come from tracing
     # A fresh run from another run's networks reads that run's checkpoint once too.
     argv = ["--trials", "2", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "100", "--quiet"]
     calls.update(load=0)
@@ -510,3 +510,26 @@ def test_committed_checkpoints_of_earlier_state_layouts_load(run):
         want = np.asarray(loaded.batch.conds.field.viscous)
         np.testing.assert_array_equal(field, want)  # each learner's trials run in its own condition
         assert not np.asarray(states.env.block.index).any() and np.asarray(states.env.block.learning).all()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "train_cfg",
+    [
+        {"conditions": ["none", "random_nopast"], "seeds": 2, "drift_gate_grid": [0.0, 0.3]},
+        {"conditions": [], "protocols": ["adaptation"], "seeds": 1, "trial_log_every": 5},
+    ],
+)
+def test_a_reader_fills_the_fields_old_checkpoints_lack_as_a_fresh_batch_has_them(train_cfg):
+    # The reader takes them from a compiled program that keeps only these leaves, not from a fresh batch built op by
+    # op; they must be the same bits (conditions and blocks of a sweep and of a protocol's first block, constants).
+    cfg = Config(
+        train=TrainConfig(trials=10, **{k: tuple(v) if isinstance(v, list) else v for k, v in train_cfg.items()})
+    )
+    fresh = checkpoint.flatten({"states": batch.init_batch(cfg).states})
+    defaults = run_dir_io.added_state_defaults(cfg)
+    assert set(defaults) == {name for name in fresh if compat.is_added_state_field(name)}
+    assert any(".env.cond." in name for name in defaults) and any(".env.block." in name for name in defaults)
+    for name, value in defaults.items():
+        assert value.dtype == fresh[name].dtype and value.shape == fresh[name].shape, name
+        np.testing.assert_array_equal(value, fresh[name], err_msg=name)

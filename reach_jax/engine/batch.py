@@ -70,14 +70,22 @@ def plans(cfg: Config) -> protocol.Plan:
     return protocol.stack_plans([c for c, _ in learner_table(cfg.train)], cfg)
 
 
+def fresh_states(cfg: Config, plan: protocol.Plan | None = None) -> learner_state.LearnerState:
+    """Every learner's first state, learner axis first: run op by op (not compiled) as every run has begun.
+
+    Args:
+      cfg: the run's config.
+      plan: `plans(cfg)`, when the caller has it.
+    """
+    keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in learner_table(cfg.train)])
+    return jax.vmap(lambda k, p: learner_state.init_learner(k, p, cfg))(keys, plans(cfg) if plan is None else plan)
+
+
 def init_batch(cfg: Config) -> Batch:
     """Fresh learners for cfg.train's conditions and protocols x seeds."""
-    table = learner_table(cfg.train)
     plan = plans(cfg)
-    keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in table])
-    states = jax.vmap(lambda k, p: learner_state.init_learner(k, p, cfg))(keys, plan)
     # Fresh buffers: init may alias leaves, which the donating chunk cannot accept.
-    return Batch(*jax.tree.map(jnp.copy, (states, conditions(cfg), hyper_columns(cfg), plan)))
+    return Batch(*jax.tree.map(jnp.copy, (fresh_states(cfg, plan), conditions(cfg), hyper_columns(cfg), plan)))
 
 
 def source_indices(source_table: list[tuple[str, int]], cfg: Config) -> list[int]:

@@ -22,9 +22,10 @@ from reach_jax.env import trial_log
 def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED, log=None):
     """lax.scan of `step((state, log), u) -> ((state, log), info)` over n_steps, drawing uniforms in blocks.
 
-    Drawing speed.draw_block steps' uniforms in one vectorised call keeps the random-number loop out of the
-    per-step body, where it cost as many kernel launches as the rest of the step. The stream does not depend on
-    the block size. The steps run on `widen_hidden` weights; the state goes in and comes out with the paper's widths.
+    Drawing a block of steps' uniforms in one vectorised call keeps the random-number loop out of the per-step
+    body, where it cost as many kernel launches as the rest of the step. The stream does not depend on the block
+    size (`block_size`). The steps run on `widen_hidden` weights; the state goes in and comes out with the paper's
+    widths.
 
     Args:
       step: one step of one learner, or of a batch when `batched`.
@@ -48,7 +49,7 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
     def block_body(carry, _):
         return jax.lax.scan(step, carry, draws(carry[0], block))
 
-    block = speed.draw_block
+    block = block_size(n_steps, speed.draw_block)
     n_blocks, rest = divmod(n_steps, block)
     carry = (widen_hidden(state, speed.hidden_pad), log)
     carry, info = jax.lax.scan(block_body, carry, None, length=n_blocks)
@@ -58,6 +59,16 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
         info = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), info, tail)
     state, log = carry
     return narrow_hidden(state, cfg), log, info
+
+
+def block_size(n_steps: int, most: int) -> int:
+    """Steps whose uniforms one call draws in a run of n_steps: n_steps itself if it is at most `most`, else the
+    largest divisor of n_steps from `most` / 2 to `most`, so that whole blocks take every step and the step body is
+    compiled once (a remainder's scan compiles it a second time, which took a third of a small chunk's compile
+    time); `most` if there is none, the rest of the steps in a second scan."""
+    if n_steps <= most:
+        return max(n_steps, 1)
+    return next((b for b in range(most, (most - 1) // 2, -1) if n_steps % b == 0), most)
 
 
 def widen_hidden(state: LearnerState, multiple: int) -> LearnerState:

@@ -192,16 +192,12 @@ def load_batch(
     Raises CheckpointError when there is none, when the config stored in it disagrees with `cfg`, or when
     `speed` (the speed to continue with; None: not checked) has another setting that changes results.
     """
-    fresh = batch.init_batch(cfg)
-    template = {"states": fresh.states, "hypers": fresh.hypers}
-    # Hyperparameters added since the checkpoint was written take their values from the config, and so do the
-    # fields that say which condition and block a trial runs in: without a protocol they never change.
-    leaves = checkpoint.flatten(template)
-    defaults = {
-        name: leaf
-        for name, leaf in leaves.items()
-        if name.startswith("['hypers']") or compat.is_added_state_field(name)
-    }
+    hypers = batch.hyper_columns(cfg)
+    template = {"states": jax.eval_shape(lambda: batch.fresh_states(cfg)), "hypers": hypers}
+    # Hyperparameters added since the checkpoint was written take their values from the config, and state fields
+    # added since (the condition and block a trial runs in, which never change without a protocol, and the
+    # others of compat.ADDED_STATE_FIELDS) the values of a fresh learner.
+    defaults = {**checkpoint.flatten({"hypers": hypers}), **added_state_defaults(cfg)}
     if path is None:
         tree, meta, path = checkpoint.load_newest(run_dir, template, defaults)
     else:
@@ -217,7 +213,21 @@ def load_batch(
     if speed is not None:
         check_speed(path, meta, speed)
     states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
-    return batch.Batch(states, fresh.conds, hypers, fresh.plans), int(meta["chunk"])
+    return batch.Batch(states, batch.conditions(cfg), hypers, batch.plans(cfg)), int(meta["chunk"])
+
+
+def added_state_defaults(cfg: Config) -> dict[str, np.ndarray]:
+    """The leaves of a fresh batch that older checkpoints lack (`compat.ADDED_STATE_FIELDS`), keyed as a checkpoint
+    stores them, without building the batch: one compiled program keeps just these leaves (copies of the config's
+    conditions and blocks, and constants: bit for bit `batch.fresh_states`'), where building every learner op by
+    op takes about 10 s a batch shape."""
+
+    def added():
+        leaves = jax.tree_util.tree_flatten_with_path({"states": batch.fresh_states(cfg)})[0]
+        named = ((jax.tree_util.keystr(path), leaf) for path, leaf in leaves)
+        return {name: leaf for name, leaf in named if compat.is_added_state_field(name)}
+
+    return {name: np.asarray(leaf) for name, leaf in jax.jit(added)().items()}
 
 
 class Run(NamedTuple):
