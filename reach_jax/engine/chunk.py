@@ -62,10 +62,12 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
 
 
 def block_size(n_steps: int, most: int) -> int:
-    """Steps whose uniforms one call draws in a run of n_steps: n_steps itself if it is at most `most`, else the
-    largest divisor of n_steps from `most` / 2 to `most`, so that whole blocks take every step and the step body is
-    compiled once (a remainder's scan compiles it a second time, which took a third of a small chunk's compile
-    time); `most` if there is none, the rest of the steps in a second scan."""
+    """Steps whose uniforms one call draws in a run of n_steps, at most `most`.
+
+    n_steps itself if it is at most `most`, else the largest divisor of n_steps from `most` / 2 to `most`, so that
+    whole blocks take every step and the step body is compiled once (a remainder's scan compiles it a second time,
+    a third of a small chunk's compile time); `most` if there is none, the rest of the steps in a second scan.
+    """
     if n_steps <= most:
         return max(n_steps, 1)
     return next((b for b in range(most, (most - 1) // 2, -1) if n_steps % b == 0), most)

@@ -217,10 +217,12 @@ def load_batch(
 
 
 def added_state_defaults(cfg: Config) -> dict[str, np.ndarray]:
-    """The leaves of a fresh batch that older checkpoints lack (`compat.ADDED_STATE_FIELDS`), keyed as a checkpoint
-    stores them, without building the batch: one compiled program keeps just these leaves (copies of the config's
-    conditions and blocks, and constants: bit for bit `batch.fresh_states`'), where building every learner op by
-    op takes about 10 s a batch shape."""
+    """The leaves of a fresh batch that older checkpoints lack (`compat.ADDED_STATE_FIELDS`), keyed as stored.
+
+    One compiled program keeps just these leaves, so the batch is never built: they are copies of the config's
+    conditions and blocks, and constants, bit for bit what `batch.fresh_states` gives them, where building every
+    learner op by op takes about 10 s a batch shape.
+    """
 
     def added():
         leaves = jax.tree_util.tree_flatten_with_path({"states": batch.fresh_states(cfg)})[0]
