@@ -21,11 +21,11 @@ from reach_jax import env
 from reach_jax.agent import exploration, learner, network
 from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_partial
 from reach_jax.engine import random_stream, rollout
+from reach_jax.engine.chunk import make_trace
 from reach_jax.engine.learner_state import init_learner
 from reach_jax.env import curriculum, protocol, task
 from reach_jax.physics import arm, encoding, fields, sensor
 from reach_jax.testing import reference
-from reach_jax.testing.trace import make_trace
 
 CFG = Config()
 N_SAMPLES = 8  # random draws per comparison: enough to hit every branch, few enough to stay fast

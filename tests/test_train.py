@@ -28,12 +28,11 @@ from reach_jax.config import (
 )
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
 from reach_jax.engine import batch, learner_state, random_stream, rollout
-from reach_jax.engine.chunk import block_size, make_chunk, narrow_hidden, widen_hidden
+from reach_jax.engine.chunk import block_size, make_chunk, make_trace, narrow_hidden, widen_hidden
 from reach_jax.engine.learner_state import init_learner
 from reach_jax.env import curriculum, protocol, task
 from reach_jax.physics import arm, encoding, fields, sensor
 from reach_jax.store import run_dir as run_dir_io
-from reach_jax.testing.trace import make_trace
 from reach_jax.train import cli as train_cli
 
 CFG = Config()

@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 from reach_jax.config import compat, hyper
+from reach_jax.config.hyperparameter import SWITCH_WORDS
 from reach_jax.config.loading import first_difference, from_dict, protocol_trials, to_dict, with_defaults
 from reach_jax.config.schema import CONFIG_VERSION, Config
 from reach_jax.errors import UsageError
@@ -86,7 +87,7 @@ def with_settings(data: dict, args) -> dict:
             raise UsageError(f"--set {section}.{field}: no longer a config field (a speed setting: see --help)")
         if section == "learner" and field in hyper.BY_NAME:
             if hyper.BY_NAME[field].switch and isinstance(value, bool):
-                value = hyper.SWITCH_WORDS[str(value).lower()]
+                value = SWITCH_WORDS[str(value).lower()]
             _set_hyper(data, field, (value,))  # as --sweep NAME=V: one intent, one config
             continue
         part = data.setdefault(section, {})

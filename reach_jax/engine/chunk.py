@@ -126,6 +126,23 @@ def chunk_body(cfg: Config, n_steps: int, speed: Speed):
     return chunk
 
 
+def make_trace(cfg: Config, n_steps: int, speed: Speed = DEFAULT_SPEED):
+    """Compiled run of one learner that keeps what every step did: `(state, plan, hyper) -> (state, StepInfo)`.
+
+    The StepInfo fields are stacked over the n_steps steps; tests compare them with the NumPy oracle.
+    """
+
+    def trace(state, plan, hyper):
+        def step_body(carry, u):
+            new, info = rollout.learner_step(carry[0], u, plan, hyper, cfg, speed=speed)
+            return (new, None), info
+
+        state, _, info = scan_steps(step_body, state, n_steps, cfg, speed=speed)
+        return state, info
+
+    return jax.jit(trace)
+
+
 def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_SPEED):
     """Compiled run of n_steps steps for a batch of learners: (states, plans, hypers, budget) -> (states, log).
 

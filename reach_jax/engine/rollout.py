@@ -24,7 +24,7 @@ from reach_jax.physics import encoding
 
 
 class StepInfo(NamedTuple):
-    """What one step did; collected only by traces (`reach_jax.testing.trace`)."""
+    """What one step did; collected only by traces (`chunk.make_trace`)."""
 
     x: jax.Array  # (125,) input
     out: jax.Array  # (3,) outputs before the update

@@ -17,6 +17,7 @@ from reach_jax.config import (
     hyper,
     tuplify,
 )
+from reach_jax.config.hyperparameter import Hyperparameter
 from reach_jax.config.overlay import PAPER_HYPER
 from reach_jax.config.schema import DEFAULT_SPEED, MAX_HIDDEN_PAD
 from reach_jax.engine import distribute
@@ -36,7 +37,7 @@ def _conditions(text: str) -> tuple[str, ...]:
     return tuple(n for n in text.replace(",", " ").split() if n)
 
 
-def _values(h: hyper.Hyperparameter, text: str) -> tuple[float, ...]:
+def _values(h: Hyperparameter, text: str) -> tuple[float, ...]:
     """Comma-separated values of hyperparameter h, each read and range-checked by the table."""
     try:
         values = tuple(h.parse(v) for v in text.split(",") if v.strip())

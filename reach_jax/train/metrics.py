@@ -21,7 +21,7 @@ def hyper_values(hypers: hyper.Hyper) -> list[dict]:
     """Each learner's hyperparameters as JSON values, read from the batch's float32 columns.
 
     A float is written as the shortest decimal that reads back to its float32 (`float32_value`: the config's value
-    wherever float32 holds it exactly enough); a count (`hyper.Hyperparameter.integer`) as an int.
+    wherever float32 holds it exactly enough); a count (`hyperparameter.Hyperparameter.integer`) as an int.
 
     Args:
       hypers: hyper.Hyper of (L,) float32 arrays, batch order.
