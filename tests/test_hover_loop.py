@@ -33,3 +33,18 @@ def test_the_tail_weights_chunks_by_their_trials_and_skips_the_early_ones(tool):
 
 def test_a_learner_with_no_chunk_in_its_tail_reports_nothing(tool):
     assert tool.learner_tail([_row(100, 100, 30.0, 90.0, 0.0)], trials=1000, tail=0.2) == {}
+
+
+def test_a_recipe_without_the_gate_reads_no_gate_and_a_gated_one_its_open_share(tool):
+    from reach_jax.config import ClaimsConfig
+
+    base = {"run": "runs/x", "condition": "none", "networks": 4, "steps_per_trial": 22.0, "n_max": 69.0}
+    rates = {"drift_rate": 0.07, "out_rate": 0.001, "cap_rate": 0.0, "setback_share": 0.0, "unstable": 0}
+    rows = [
+        {**base, **rates, "recipe": "ungated", "gated": False, "gate_open_rate": 1.0},
+        {**base, **rates, "recipe": "gated", "gated": True, "gate_open_rate": 0.004},
+    ]
+    lines = tool.markdown(rows, "cmd", ClaimsConfig()).splitlines()
+    ungated, gated = (next(line for line in lines if f"| {name} |" in line) for name in ("ungated", "gated"))
+    assert "| no gate |" in ungated and "100.0%" not in ungated
+    assert "| 0.4% |" in gated and "no gate" not in gated
