@@ -1,4 +1,4 @@
-"""Compiled chunks of learner steps: the scan over steps, the padded layout, and sharding over devices (model §5).
+"""Compiled chunks of learner steps: the scan, the padded layout, sharding, and a one-learner trace (model §5).
 
 Learners never interact, so `make_chunk` shards the learner axis over devices (`distribute`) and each device runs
 its own slice with no communication; the same code runs on CPU host devices, GPU, TPU or several hosts (after
