@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from reach_jax.config import ClaimsConfig
+
 
 @pytest.fixture
 def tool(load_tool):
@@ -36,8 +38,6 @@ def test_a_learner_with_no_chunk_in_its_tail_reports_nothing(tool):
 
 
 def test_a_recipe_without_the_gate_reads_no_gate_and_a_gated_one_its_open_share(tool):
-    from reach_jax.config import ClaimsConfig
-
     base = {"run": "runs/x", "condition": "none", "networks": 4, "steps_per_trial": 22.0, "n_max": 69.0}
     rates = {"drift_rate": 0.07, "out_rate": 0.001, "cap_rate": 0.0, "setback_share": 0.0, "unstable": 0}
     rows = [
