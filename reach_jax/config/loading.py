@@ -233,8 +233,25 @@ def _check_train(cfg: Config) -> None:
         hyper.check(f"train.{h.grid}", h.name, getattr(train, h.grid))
     lows = train.noise_value_lo_grid or (cfg.learner.noise_value_lo,)
     highs = train.noise_value_hi_grid or (cfg.learner.noise_value_hi,)
-    if max(lows) >= min(highs):
+    if train.zip_grids:
+        _check_zipped(train)
+        n = max(len(lows), len(highs))  # each is 1 long or n long
+        if any(lo >= hi for lo, hi in zip(lows * (n // len(lows)), highs * (n // len(highs)), strict=True)):
+            raise ValueError("learner.noise_value_lo: must lie below noise_value_hi in every sweep point")
+    elif max(lows) >= min(highs):
         raise ValueError("learner.noise_value_lo: must lie below noise_value_hi in every sweep point")
+
+
+def _check_zipped(train) -> None:
+    """Zipped grids pair up point by point, so every grid given has the same length."""
+    lengths = {h.grid: len(getattr(train, h.grid)) for h in hyper.TABLE if getattr(train, h.grid)}
+    first = next(iter(lengths), None)
+    for grid, n in lengths.items():
+        if n != lengths[first]:
+            raise ValueError(
+                f"train.{grid}: {n} values, but train.{first} has {lengths[first]} "
+                "(train.zip_grids pairs the grids point by point)"
+            )
 
 
 def first_difference(a: Config, b: Config) -> str | None:

@@ -22,7 +22,7 @@ from reach_jax.config.tables import (
     ProtocolConfig,
 )
 
-CONFIG_VERSION = 6  # a stored config holds every field; versions 3-6 each added fields (`compat`)
+CONFIG_VERSION = 7  # a stored config holds every field; versions 3-7 each added fields (`compat`)
 
 
 @dataclass(frozen=True)
@@ -145,10 +145,12 @@ class TrainSettings:
     trial_log_every: int = 0  # log every n-th trial's movement to trials/ (model §12); 0 = no per-trial log
     direction_time: float = 0.1  # the logged initial direction is the hand's at this time into the trial [s] (choice)
     saturated_output: float = 0.45  # metrics count an actor output |m| above it as saturated (model §5 choice)
+    zip_grids: bool = False  # the sweep grids pair up point by point (a design's draws, studies/search) instead of
+    # crossing; every grid given then has the same length
 
 
 # The settings, then one sweep grid per entry of hyper.TABLE (<name>_grid): the values crossed with the other
-# grids, () = the learner's default.
+# grids (or paired with them, `zip_grids`), () = the learner's default.
 TrainConfig = dataclasses.make_dataclass(
     "TrainConfig",
     hyper.grid_fields(),

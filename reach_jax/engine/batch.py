@@ -28,9 +28,24 @@ class Batch(NamedTuple):
 
 
 def hyper_grid(cfg: Config) -> list[dict[str, float]]:
-    """Hyperparameter combinations of a sweep, keyed like hyper.Hyper; the learner defaults when nothing is swept."""
+    """Hyperparameter combinations of a sweep, keyed like hyper.Hyper; the learner defaults when nothing is swept.
+
+    The grids are crossed, or with `train.zip_grids` paired point by point (a grid left empty repeats the default).
+    """
+    n = n_sweep_points(cfg.train)
+    if cfg.train.zip_grids:
+        axes = [getattr(cfg.train, h.grid) or (getattr(cfg.learner, h.name),) * n for h in hyper.TABLE]
+        return [dict(zip(hyper.NAMES, combo, strict=True)) for combo in zip(*axes, strict=True)]
     axes = [getattr(cfg.train, h.grid) or (getattr(cfg.learner, h.name),) for h in hyper.TABLE]
     return [dict(zip(hyper.NAMES, combo, strict=True)) for combo in itertools.product(*axes)]
+
+
+def n_sweep_points(train: TrainConfig) -> int:
+    """Recipes of a sweep: the grids' lengths multiplied, or with `zip_grids` the common length (1 without grids)."""
+    lengths = [len(getattr(train, h.grid)) for h in hyper.TABLE if getattr(train, h.grid)]
+    if train.zip_grids:
+        return max(lengths, default=1)
+    return math.prod(lengths)
 
 
 def learner_hypers(cfg: Config) -> list[dict[str, float]]:
@@ -51,7 +66,7 @@ def hyper_columns(cfg: Config) -> hyper.Hyper:
 
 def learner_table(train: TrainConfig) -> list[tuple[str, int]]:
     """(condition or protocol, seed index) of every learner, in batch order: name, then sweep point, then seed."""
-    n_grid = math.prod(max(len(getattr(train, h.grid)), 1) for h in hyper.TABLE)
+    n_grid = n_sweep_points(train)
     return [(c, s) for c in learner_names(train) for _ in range(n_grid) for s in range(train.seeds)]
 
 
