@@ -25,6 +25,18 @@ from reach_jax.train import cli
 ARGV = ["--trials", "60", "--seeds", "1", "--conditions", "none,random", "--chunk-steps", "300"]
 
 
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def committed_runs(root: Path = ROOT) -> list[str]:
+    """The names of the runs under root/runs that git tracks (by their config.json), never what a user has trained
+    there: a run of the README's first command has no README, and tests of committed runs must not see it."""
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "--", "runs/*/config.json"], cwd=root, capture_output=True, text=True, check=True
+    ).stdout
+    return sorted(Path(p).parent.name for p in listed.split("\0") if p and len(Path(p).parts) == 3)
+
+
 def snapshot(folder: Path) -> dict:
     """Every file under folder with its size and modification time."""
     return {str(p): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(folder.rglob("*")) if p.is_file()}
@@ -123,7 +135,8 @@ def _share_compilations(config) -> None:
 
     Many tests compile the same program (the same small run trained in-process, in subprocesses and across
     processes); with the cache each is compiled once. It stores executables only: every test still runs its own.
-    A cache already set (JAX_COMPILATION_CACHE_DIR) is used as it is.
+    A cache already set (JAX_COMPILATION_CACHE_DIR) is used as it is: so the xdist workers, started after the
+    controller set it, share the controller's.
     """
     if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
         return

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
 
 from reach_jax.config import ClaimsConfig, Config, paper
-from reach_jax.evaluate import claims, report, stats
+from reach_jax.evaluate import claims, lattice, report, stats
 from reach_jax.evaluate.verdicts import curriculum_stability
 
 CFG = Config()
@@ -106,6 +107,67 @@ def test_rate_intervals_stay_inside_0_1_and_cover():
     assert stats.rate_ci([1.0, 1.0])["low"] == 1.0 and stats.rate_ci([0.3])["low"] is None
     # Coverage of the mean of 8 networks' rates drawn around 0.95 (beta-distributed): close to the nominal 95%.
     assert 0.92 < coverage(stats.rate_ci, lambda rng: rng.beta(19.0, 1.0, 8), 0.95) < 0.98
+
+
+def test_positive_intervals_stay_above_zero_and_cover():
+    # The README command's 2-network table printed a mean time of "0.44 [-0.63, 1.50]" s with the t-interval.
+    two = np.array([0.36, 0.52])
+    t, pos = stats.mean_ci(two), stats.positive_ci(two)
+    assert t["low"] < 0.0 < pos["low"] < pos["mean"] < pos["high"] and pos["mean"] == t["mean"]
+    assert pos["values"] == [0.36, 0.52] and "signed" not in pos
+    # On the log scale: symmetric about the mean in ratio, close to the t-interval where the spread is small.
+    assert pos["mean"] / pos["low"] == pytest.approx(pos["high"] / pos["mean"])
+    tight = np.array([10.0, 10.2, 9.9, 10.1, 9.8, 10.0])
+    assert (stats.positive_ci(tight)["low"], stats.positive_ci(tight)["high"]) == pytest.approx(
+        (stats.mean_ci(tight)["low"], stats.mean_ci(tight)["high"]), rel=1e-3
+    )
+    # A damping can be negative: where a network's is, the plain interval, marked signed.
+    signed = stats.positive_ci([-3.0, 5.0, 12.0])
+    assert signed["signed"] and (signed["low"], signed["high"]) == pytest.approx(
+        (stats.mean_ci([-3.0, 5.0, 12.0])["low"], stats.mean_ci([-3.0, 5.0, 12.0])["high"])
+    )
+    # Coverage of the mean of 8 log-normal times: close to the nominal 95%.
+    assert 0.92 < coverage(stats.positive_ci, lambda rng: rng.lognormal(0.0, 0.3, 8), math.exp(0.045)) < 0.98
+
+
+def test_with_two_networks_the_tables_show_each_networks_value_and_no_negative_number():
+    # Two networks a condition, spread as in the README command's run: no interval, each value beside the mean.
+    cells = paper_like()
+    rows = [{**r, "seed": r["seed"] % 2} for r in rows_from(cells) if r["seed"] < 2]
+    rows[0]["mean_time_s"], rows[1]["mean_time_s"] = 0.36, 0.52  # none -> none of seeds 0 and 1
+    cfg = Config()
+    recipe = {
+        "hypers": {"lr": 1.0},
+        "level": 0.95,
+        "informative_networks": cfg.claims.informative_networks,
+        "networks_per_condition": 2,
+        "claims": claims.recipe_claims(claims.Cells(rows, PAIRS), AFTER_PAPER, cfg),
+        "cells": claims.table_cells(claims.Cells(rows, PAIRS), cfg.claims),
+        "impedance": [
+            {
+                "learning": "none",
+                "test": "none",
+                **{n: stats.positive_ci([22.6, 31.6]) for n in ("damping_unstable", "damping_stable")},
+                "passive_damping_unstable": stats.positive_ci([6.5, 6.7]),
+            }
+        ],
+        "curriculum": {"learners": [], "judged": 0, "all_stable": True},
+    }
+    table = {"pairs_per_network": PAIRS, "first_two": []}
+    text = lattice.table2_markdown(table, [recipe], "runs/x (chunk 1)")
+    assert "| none → none | " in text and "0.44 (networks 0.36, 0.52)" in text
+    assert "[" not in text.split("| none → none |")[1].split("\n")[0]  # no interval in the row
+    assert "each network's value stands beside the mean" in text
+    words = report.claims_markdown({"recipes": [recipe]}, "runs/x (chunk 1)")
+    assert "27.1 (networks 22.6, 31.6)" in words and "each network's value stands beside the mean" in words
+    # No negative number in Table 2 or the damping table (the claims' differences may be negative: drops).
+    for page in (text, words.split("Learned hand damping")[1]):
+        assert not re.search(r"(?<![\w→-])-\d", page.replace("–", "")), page
+    # With 4 networks the interval is back.
+    four = {**recipe, "networks_per_condition": 4, "impedance": []}
+    four["cells"] = claims.table_cells(claims.Cells([r for r in rows_from(cells) if r["seed"] < 4], PAIRS), cfg.claims)
+    assert "each network's value" not in lattice.table2_markdown(table, [four], "runs/x (chunk 1)")
+    assert re.search(r"\| none → none \| [\d.]+ \[[\d.]+, [\d.]+\]", lattice.table2_markdown(table, [four], "s"))
 
 
 def test_paper_numbers_make_every_claim_hold_and_every_cell_near():

@@ -6,13 +6,13 @@ from __future__ import annotations
 import dataclasses
 import re
 import shlex
-from pathlib import Path
+import subprocess
 
 import chex
 import jax
 import numpy as np
 import pytest
-from conftest import final_arrays, snapshot
+from conftest import ROOT, committed_runs, final_arrays, snapshot
 
 from reach_jax import errors
 from reach_jax.config import Config, LearnerConfig, TrainConfig, hyper
@@ -92,6 +92,29 @@ def test_describe_words_a_recipe_from_the_table_naming_only_what_is_set_and_on()
     assert hyper.describe(on) == (
         "bound 0.1; annealed to ×0.5; the anneal over 100,000 trials; drift only above 0.2 recent failure; "
         "the failure share over 50 trials; N_max from clean successes"
+    )
+
+
+def test_zipped_grids_pair_point_by_point_and_must_share_a_length():
+    # A space-filling design's draws (studies/search): recipe k takes the k-th value of every grid given.
+    argv = ["--sweep", "lr=0.5,1,2", "--sweep", "noise=0.15,0.2,0.3", "--seeds", "2", "--conditions", "none,random"]
+    crossed, zipped = parsed(*argv), parsed(*argv, "--set", "train.zip_grids=true")
+    assert len(batch.hyper_grid(crossed)) == 9 and len(batch.learner_table(crossed.train)) == 9 * 2 * 2
+    points = [(h["lr"], h["noise"], h["lam"]) for h in batch.hyper_grid(zipped)]
+    assert points == [(0.5, 0.15, 0.999), (1.0, 0.2, 0.999), (2.0, 0.3, 0.999)]  # an unswept one at its default
+    assert len(batch.learner_table(zipped.train)) == len(batch.learner_hypers(zipped)) == 3 * 2 * 2
+    assert np.asarray(batch.hyper_columns(zipped).noise).tolist() == pytest.approx(
+        [0.15] * 2 + [0.2] * 2 + [0.3] * 2 + [0.15] * 2 + [0.2] * 2 + [0.3] * 2
+    )
+    with pytest.raises(errors.UsageError, match="train.noise_grid: 2 values, but train.lr_grid has 3"):
+        parsed("--sweep", "lr=0.5,1,2", "--sweep", "noise=0.1,0.2", "--set", "train.zip_grids=true")
+    with pytest.raises(errors.UsageError, match="noise_value_lo: must lie below noise_value_hi in every sweep point"):
+        parsed(
+            "--sweep", "noise_value_lo=0.1,0.5", "--sweep", "noise_value_hi=0.6,0.4", "--set", "train.zip_grids=true"
+        )
+    # Crossed, the first pair of grids would fail too (0.5 > 0.4); zipped, each point is judged on its own.
+    assert parsed(
+        "--sweep", "noise_value_lo=0.1,0.2", "--sweep", "noise_value_hi=0.6,0.4", "--set", "train.zip_grids=true"
     )
 
 
@@ -200,8 +223,20 @@ def test_a_run_resumes_under_any_spelling_of_its_setting(stored, tmp_path):
     assert snapshot(tmp_path) == before
 
 
-ROOT = Path(__file__).resolve().parents[1]
-RUNS = sorted(p.parent.name for p in (ROOT / "runs").glob("*/config.json"))
+RUNS = committed_runs()
+
+
+def test_the_committed_runs_are_those_git_tracks_not_a_users_run_beside_them(tmp_path):
+    # The README's first command leaves runs/<name>/ with a config and no README; the tests of committed runs
+    # (this file's, parametrized over RUNS) must not pick it up.
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    for name in ("kept", "users"):
+        (tmp_path / "runs" / name).mkdir(parents=True)
+        (tmp_path / "runs" / name / "config.json").write_text("{}")
+    (tmp_path / "runs" / "kept" / "README.md").write_text("# kept")
+    subprocess.run(["git", "-C", str(tmp_path), "add", "runs/kept"], check=True)
+    assert committed_runs(tmp_path) == ["kept"]
+    assert "table2" in RUNS and all((ROOT / "runs" / run / "README.md").is_file() for run in RUNS)
 
 
 def readme_command(run: str) -> list[str]:

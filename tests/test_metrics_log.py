@@ -82,6 +82,29 @@ def test_old_jsonl_and_new_gzip_metrics_read_the_same_rows(tmp_path):
     assert run_dir_io.read_metrics(old) == ROWS + rows_of(N_CHUNKS + 1)
 
 
+def test_an_old_runs_jsonl_gzipped_reads_the_same_rows_and_resumes_as_a_gzip_log(tmp_path):
+    # tools/gzip_metrics.py turns the committed runs' metrics.jsonl into this form.
+    src, run = tmp_path / "old.jsonl", tmp_path / "run"
+    src.write_text("".join(json.dumps(r) + "\n" for r in ROWS))
+    run.mkdir()
+    metrics_log.gzip_lines(src, run / run_dir_io.METRICS_FILE, run_dir_io.LEARNER_COLUMNS)
+    got = run_dir_io.read_metrics(run)
+    assert got == ROWS and [list(r) for r in got] == [list(r) for r in ROWS]  # the columns in their order, too
+    assert len(members(run / run_dir_io.METRICS_FILE)) == 1 + N_CHUNKS
+    run_dir_io.truncate_metrics(run, 2)
+    run_dir_io.append_metrics(run, rows_of(3))
+    assert run_dir_io.read_metrics(run) == ROWS[: 3 * N_LEARNERS]
+    # A column that a learner's rows do not all share (a resumed run gained it part way) stays in the rows.
+    rows = [dict(r) for r in ROWS]
+    for r in rows[:N_LEARNERS]:
+        del r["noise_corr"]
+    src.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    metrics_log.gzip_lines(src, tmp_path / "other.gz", run_dir_io.LEARNER_COLUMNS)
+    assert metrics_log.read_members(tmp_path / "other.gz") == rows
+    head = members(tmp_path / "other.gz")[0]
+    assert "noise_corr" not in head and '"lr"' in head
+
+
 def test_each_learners_fixed_columns_are_written_once_and_put_back(tmp_path):
     path = gzip_run(tmp_path)
     head, *chunks = members(path)

@@ -321,12 +321,17 @@ def test_frozen_after_budget():
 
 
 def test_a_fresh_batch_has_the_types_that_a_chunk_returns():
-    # A weak-typed leaf in the fresh state made the second chunk of every run compile the loop again.
+    # A weak-typed leaf in the fresh state made the second chunk of every run compile the loop again. Shape, dtype
+    # and weak type are compared: the rest of jax.typeof (its abstract sharding) differed once between two test
+    # workers that share one compilation cache, which says nothing about the fresh state.
     cfg = tiny()
     group = batch.init_batch(cfg)
-    fresh = [jax.typeof(a) for a in jax.tree.leaves(group.states)]
+
+    def types(tree):
+        return [(a.shape, a.dtype, jax.typeof(a).weak_type) for a in jax.tree.leaves(tree)]
+
     states, _ = make_chunk(cfg, 20)(group.states, group.plans, group.hypers, jnp.array(10**6))
-    assert fresh == [jax.typeof(a) for a in jax.tree.leaves(states)]
+    assert types(group.states) == types(states)
 
 
 def test_matvec2_rounds_as_the_dot_it_replaced():

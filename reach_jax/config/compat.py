@@ -24,7 +24,7 @@ ADDED_CONFIG_FIELDS = {
             **{f"{name}_grid": [] for name in ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")},
         },
     },
-    7: {"train": {"zip_grids": False}},
+    7: {"train": {"zip_grids": False}, "claims": {"informative_networks": 4}},
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change

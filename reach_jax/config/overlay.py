@@ -21,7 +21,7 @@ from reach_jax.errors import UsageError
 # Training flag -> the TrainConfig field it sets.
 TRAIN_FLAGS = {
     **{name: name for name in ("trials", "seeds", "conditions", "seed", "chunk_steps", "keep_every")},
-    **{name: name for name in ("protocols", "init_from", "trial_log_every", "zip_grids")},
+    **{name: name for name in ("protocols", "init_from", "trial_log_every")},
 }
 PAPER_HYPER = ("lr", "noise", "lam")  # the hyperparameters with a flag of their own; the rest take --sweep
 

@@ -31,6 +31,8 @@ class ClaimsConfig:
     """
 
     level: float = 0.95  # two-sided coverage of every confidence interval over networks
+    informative_networks: int = 4  # below this many networks a condition, tables show each network's value instead
+    # of an interval (with 2, t = 12.7 makes any interval uninformative; docs/claims.md)
     matched_min_success: float = 0.90  # claim 1: the interval of mean success stays above this
     robust_min_success_none: float = 0.85  # claim 4: random -> none success interval above this
     robust_min_success_field: float = 0.80  # claim 4: random -> viscous success interval above this

@@ -2,7 +2,7 @@
 
 Units: success and out are fractions of a network's 1040 test pairs (percentage points in the Markdown), times
 are seconds, angles degrees, damping N s/m. Every interval is a Student-t interval over networks (`stats`), on the
-logit scale for success and out rates (`stats.rate_ci`).
+logit scale for success and out rates (`stats.rate_ci`) and on the log scale for times (`stats.positive_ci`).
 
 Networks are grouped into recipes (one per sweep point of a run, a single one otherwise); within a recipe the
 networks of different learning conditions are paired by seed index, since seed s starts from the same initial
@@ -222,7 +222,7 @@ def table_cells(cells: Cells, c: ClaimsConfig) -> list[dict]:
         if not cells.has(learning) or not len(cells.get(learning, test, "success")):
             continue
         ours = {name: stats.rate_ci(cells.get(learning, test, name), c.level) for name in ("success", "out")}
-        ours["mean_time_s"] = stats.mean_ci(cells.get(learning, test, "mean_time_s"), c.level)
+        ours["mean_time_s"] = stats.positive_ci(cells.get(learning, test, "mean_time_s"), c.level)
         paper = paper_cell(learning, test) if (learning, test) in PAPER_TABLE2 else None
         near = None
         if paper is not None:

@@ -29,6 +29,7 @@ from reach_jax.config import Config, hyper
 from reach_jax.config.paper import PAPER_NETWORKS, PAPER_TABLE2
 from reach_jax.env import task
 from reach_jax.env.environment import OUTCOME_NAMES, SUCCESS
+from reach_jax.evaluate.report import interval_text
 from reach_jax.physics import fields, sensor
 
 
@@ -143,12 +144,6 @@ def _cell(success: int, out: int, fail: int, mean_time: float) -> str:
     return f"{success}-{out}-{fail} ({mean_time:.3g} s)"
 
 
-def _interval(ci: dict, scale: float = 100.0, digits: int = 1) -> str:
-    if ci["low"] is None:
-        return f"{ci['mean'] * scale:.{digits}f}"
-    return f"{ci['mean'] * scale:.{digits}f} [{ci['low'] * scale:.{digits}f}, {ci['high'] * scale:.{digits}f}]"
-
-
 def _recipe_name(hypers: dict) -> str:
     return ", ".join(f"{k} {v:g}" for k, v in hypers.items())
 
@@ -165,7 +160,8 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
     lines = [
         f"# Table 2 — {source}",
         "",
-        f"Mean per network with its {level:.0%} t-interval over networks (on the logit scale for success and out),"
+        f"Mean per network with its {level:.0%} t-interval over networks (on the logit scale for success and out, the"
+        " log scale for time),"
         f" {table['pairs_per_network']} (start, target) pairs per network; out and fail count as 4.0 s in the mean"
         " time. Beside it, success-out-fail (mean time) summed over our networks of seeds 0 and 1, and the paper's"
         f" sum over its {PAPER_NETWORKS}"
@@ -173,6 +169,12 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
         " fraction (S / O / T).",
     ]
     sums = {(r["learning"], r["test"], r["recipe"]): r for r in table["first_two"]}
+    few = recipes[0].get("informative_networks", 0) if recipes else 0
+    if recipes and recipes[0]["networks_per_condition"] < few:
+        lines[-1] += (
+            f" With {recipes[0]['networks_per_condition']} networks a condition (fewer than {few}) an interval says"
+            " little, so each network's value stands beside the mean instead."
+        )
     for k, recipe in enumerate(recipes):
         lines += [
             "",
@@ -193,8 +195,8 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
                 else "–"
             )
             lines.append(
-                f"| {cell['learning']} → {cell['test']} | {_interval(cell['success'])} | {_interval(cell['out'])} | "
-                f"{_interval(cell['mean_time_s'], 1.0, 2)} | {ours01} | "
-                f"{paper} | {near} |"
+                f"| {cell['learning']} → {cell['test']} | {interval_text(cell['success'], few, 100.0)} | "
+                f"{interval_text(cell['out'], few, 100.0)} | {interval_text(cell['mean_time_s'], few, 1.0, 2)} | "
+                f"{ours01} | {paper} | {near} |"
             )
     return "\n".join(lines) + "\n"

@@ -16,8 +16,30 @@ def paper_cells(cells: list[dict]) -> tuple[list[dict], list[dict]]:
     return judged, [cell for cell in judged if all(cell["near_paper"].values())]
 
 
-def _fmt(name: str, value) -> str:
-    """One number of a claim in words: intervals as "mean [low, high]" in the unit its name implies."""
+def interval_text(ci: dict, few: int, scale: float = 1.0, digits: int = 1, unit: str = "") -> str:
+    """A mean with its interval, "mean [low, high]", or with each network's value, "mean (networks a, b)", where
+    there are fewer than `few` networks (or no interval); "–" without a value.
+
+    Args:
+        ci: a `stats` interval: mean, low, high, n and the networks' values.
+        few: `informative_networks` of the claims' criteria.
+        scale: multiplies every number (100 for percentages).
+        digits: decimals shown.
+        unit: written after the mean.
+    """
+    if ci["mean"] is None:
+        return "–"
+    text = f"{ci['mean'] * scale:.{digits}f}{unit}"
+    values = ci.get("values", [])
+    if ci["n"] < few or ci["low"] is None:
+        if len(values) > 1:
+            text += " (networks " + ", ".join(f"{v * scale:.{digits}f}" for v in values) + ")"
+        return text
+    return text + f" [{ci['low'] * scale:.{digits}f}, {ci['high'] * scale:.{digits}f}]"
+
+
+def _fmt(name: str, value, few: int = 0) -> str:
+    """One number of a claim in words, in the unit its name implies (`interval_text`)."""
     if isinstance(value, dict) and "mean" in value:
         if value["mean"] is None:
             return "–"
@@ -29,10 +51,7 @@ def _fmt(name: str, value) -> str:
             scale, unit, digits = 100.0, "%", 1
         else:
             scale, unit, digits = 100.0, " pts", 1
-        text = f"{value['mean'] * scale:.{digits}f}{unit}"
-        if value.get("low") is not None:
-            text += f" [{value['low'] * scale:.{digits}f}, {value['high'] * scale:.{digits}f}]"
-        return text
+        return interval_text({"n": 1, "low": None, **value}, few, scale, digits, unit)
     if value is None:
         return "–"
     if "fraction" in name or "paths_pulled" in name:
@@ -51,11 +70,12 @@ def claims_markdown(result: dict, source: str) -> str:
     lines = [f"# The paper's claims — {source}", ""]
     for k, recipe in enumerate(result["recipes"]):
         name = ", ".join(f"{key} {v:g}" for key, v in recipe["hypers"].items())
+        few = recipe.get("informative_networks", 0)
         lines += [
             f"## Recipe {k}: {name} ({recipe['networks_per_condition']} networks per condition)",
             "",
             f"Intervals are {recipe['level']:.0%} t-intervals over networks, on the logit scale for success and out"
-            " rates; differences are paired by seed.",
+            " rates and on the log scale for times and ratios; differences are paired by seed. " + _few_words(recipe),
             "",
             "| claim | test | ours | paper | verdict |",
             "|---|---|---|---|---|",
@@ -65,7 +85,7 @@ def claims_markdown(result: dict, source: str) -> str:
             for key, value in c["numbers"].items():
                 inner = value.get("success", value) if isinstance(value, dict) and "success" in value else value
                 label = f"{key}_success" if isinstance(value, dict) and "success" in value else key
-                ours.append(f"{key.replace('_', ' ')}: {_fmt(label, inner)}")
+                ours.append(f"{key.replace('_', ' ')}: {_fmt(label, inner, few)}")
                 if isinstance(value, dict) and "paper" in value:
                     paper.append(f"{key.replace('_', ' ')}: {_paper_fmt(label, value['paper'])}")
                 elif key == "paper_angle_deg":
@@ -85,13 +105,16 @@ def claims_markdown(result: dict, source: str) -> str:
             "",
             "Curriculum: " + _curriculum_words(cur, unstable),
             "",
-            "Learned hand damping (mean over networks of each network's median, N s/m) along the field's axes:",
+            "Learned hand damping (mean over networks of each network's median, N s/m) along the field's axes; the"
+            " interval is on the log scale where every network's damping is positive, and plain where one is not"
+            " (a learned damping can be negative):",
             "",
             "| learning → test | unstable axis | stable axis | passive, unstable axis |",
             "|---|---|---|---|",
         ]
         for cell in recipe["impedance"]:
-            dmp = [_interval_plain(cell[n]) for n in ("damping_unstable", "damping_stable", "passive_damping_unstable")]
+            names = ("damping_unstable", "damping_stable", "passive_damping_unstable")
+            dmp = [interval_text(cell[n], few) for n in names]
             lines.append(f"| {cell['learning']} → {cell['test']} | " + " | ".join(dmp) + " |")
         lines.append("")
     return "\n".join(lines)
@@ -107,9 +130,12 @@ def _curriculum_words(cur: dict, unstable: list[int]) -> str:
     return text + "."
 
 
-def _interval_plain(ci: dict) -> str:
-    if ci["mean"] is None:
-        return "–"
-    if ci["low"] is None:
-        return f"{ci['mean']:.1f}"
-    return f"{ci['mean']:.1f} [{ci['low']:.1f}, {ci['high']:.1f}]"
+def _few_words(recipe: dict) -> str:
+    """The sentence that says when a network's own values stand in for an interval."""
+    few = recipe.get("informative_networks", 0)
+    if recipe["networks_per_condition"] >= few:
+        return ""
+    return (
+        f"With {recipe['networks_per_condition']} networks a condition (fewer than {few}) an interval says little,"
+        " so each network's value stands beside the mean instead."
+    )

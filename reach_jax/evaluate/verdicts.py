@@ -13,6 +13,8 @@ from reach_jax.evaluate import claims, pulls, stats
 def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
     """Mean over networks (with its interval) of each network's median gains, per learning x test cell.
 
+    The interval is on the log scale where every network's gain is positive, else plain (`stats.positive_ci`).
+
     Args:
       summary: `impedance.summarize` results.
       nets: the networks to pool (indices into the learner table).
@@ -27,7 +29,7 @@ def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
             {
                 "learning": learning,
                 "test": test,
-                **{n: stats.mean_ci([r[n]["median"] for r in sub], level) for n in names},
+                **{n: stats.positive_ci([r[n]["median"] for r in sub], level) for n in names},
             }
         )
     return cells
@@ -57,6 +59,7 @@ def decide(
             {
                 "hypers": hypers,
                 "level": level,
+                "informative_networks": cfg.claims.informative_networks,
                 "networks_per_condition": cfg.train.seeds,
                 "claims": claims.recipe_claims(cells, after_k, cfg),
                 "aftereffect": after_k,

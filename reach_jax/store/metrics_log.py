@@ -158,6 +158,39 @@ def append_member(path: Path, rows: list[dict], fixed: tuple[str, ...]) -> None:
     files.atomic_write_bytes(path, header + member)
 
 
+def gzip_lines(src: Path, dst: Path, fixed: tuple[str, ...]) -> None:
+    """Write the rows of the JSON-lines log `src` as the gzip log `dst`, one member per chunk, so that
+    `read_members(dst)` gives the rows that `read_lines(src)` gives; `src` is left as it is.
+
+    A name of `fixed` goes in the header only where every row holds it and each learner's rows agree on it (a run
+    resumed under newer code may have gained a column part way); other columns stay in the rows. A row's columns
+    keep their order where its fixed ones follow "learner", as every run writes them.
+    """
+    rows = read_lines(src)
+    if not rows:
+        raise ValueError(f"{src}: no rows to convert")
+    per_learner: dict[int, dict] = {}
+    for r in rows:
+        per_learner.setdefault(r["learner"], r)
+    kept = tuple(name for name in fixed if all(name in r and r[name] == per_learner[r["learner"]][name] for r in rows))
+    if sorted(per_learner) != list(range(len(per_learner))):
+        raise ValueError(f"{src}: learners are not numbered 0..L-1")
+    header = _member([{"learners": [{n: per_learner[i][n] for n in kept} for i in range(len(per_learner))]}])
+    members, group = [], [rows[0]]
+    for r in rows[1:]:
+        if r["chunk"] == group[0]["chunk"] and list(r) == list(group[0]):
+            group.append(r)
+        else:
+            members.append(group)
+            group = [r]
+    members.append(group)
+    parts = [header]
+    for group in members:
+        columns = [name for name in group[0] if name not in kept]
+        parts.append(_member([{"columns": columns}, *([r[name] for name in columns] for r in group)]))
+    files.atomic_write_bytes(dst, b"".join(parts))
+
+
 def truncate_members(path: Path, chunk: int) -> None:
     """Drop the members of a gzip log whose rows are past `chunk`, and any member cut short or unreadable, atomically.
 

@@ -135,14 +135,6 @@ def build_train_parser() -> argparse.ArgumentParser:
         help="any hyperparameter of --list-hyper, repeatable: one value sets it (learner.NAME), several sweep it "
         "(train.NAME_grid, crossed with the other grids); a switch takes true/false or 1/0",
     )
-    core.add_argument(
-        "--zip-grids",
-        dest="zip_grids",
-        action="store_true",
-        default=None,
-        help="pair the --sweep grids point by point, one recipe per position (every grid of one length), instead "
-        "of crossing them: a space-filling design's draws",
-    )
     core.add_argument("--list-hyper", action=_ListHyper, help="print the hyperparameters (name, default, range, help)")
 
     infra = p.add_argument_group("infrastructure", "devices, chunking and logging, multi-host")

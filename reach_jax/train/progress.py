@@ -15,6 +15,15 @@ def _clock(seconds: float) -> str:
     return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
 
 
+def _span(low: float, high: float) -> str:
+    """A range of seconds in the coarsest unit that still tells its ends apart: "12–19 min", "1.5–2.4 h"."""
+    if high < 120:
+        return f"{low:.0f}–{high:.0f} s"
+    if high < 2 * 3600:
+        return f"{low / 60:.0f}–{high / 60:.0f} min"
+    return f"{low / 3600:.1f}–{high / 3600:.1f} h"
+
+
 class Progress:
     """Shows done/total, a bar, a free-form status and an ETA."""
 
@@ -28,8 +37,16 @@ class Progress:
         self.first_done = None
         self.last_print = -float("inf")
 
-    def update(self, done: int, status: str = "", force: bool = False, eta: float | None = None) -> None:
-        """Redraw with `done` units finished; `eta` [s], when given, replaces the estimate from the total rate."""
+    def update(
+        self,
+        done: int,
+        status: str = "",
+        force: bool = False,
+        eta: float | None = None,
+        eta_range: tuple[float, float] | None = None,
+    ) -> None:
+        """Redraw with `done` units finished; `eta` [s], when given, replaces the estimate from the total rate, and
+        `eta_range` ([s], [s]) is shown beside it, the span in which the time left is likely to lie."""
         now = time.monotonic()
         if self.first_done is None:
             self.first_done = (done, now)
@@ -41,7 +58,7 @@ class Progress:
         rate = (done - d0) / (now - t0) if now > t0 and done > d0 else 0.0
         if eta is None:
             eta = (self.total - done) / rate if rate > 0 else None
-        eta = "?" if eta is None else _clock(eta)
+        eta = "?" if eta is None else _clock(eta) + ("" if eta_range is None else f" ({_span(*eta_range)})")
         bar = "#" * int(20 * frac) + "." * (20 - int(20 * frac))
         line = (
             f"[{bar}] {done:,}/{self.total:,} {self.unit} {100 * frac:3.0f}% | {status} | "
@@ -68,18 +85,23 @@ class LearnerEta:
     """Time left [s] until the slowest learner is done, from each learner's steps left and the time of a step.
 
     Learners of a batch run in lockstep, and in a run's tail the batch shrinks to the unfinished learners
-    (`pow2_batch`), where a step takes less time. So the estimate walks the learners' finishing order: with
-    s_1 <= ... <= s_k the steps left of the k unfinished learners, the batch runs s_1 steps at size pow2_batch(k),
-    then s_2 - s_1 at pow2_batch(k - 1), and so on.
+    (`pow2_batch`), where a step takes less time. So the estimate walks the learners' finishing order: with s_1 <=
+    ... <= s_k the steps left of the k unfinished learners, the batch runs s_1 steps at size pow2_batch(k), then s_2
+    - s_1 at pow2_batch(k - 1), and so on.
 
     Steps left are trials left x steps per trial, which changes as a learner learns and in its crises. Three
     measures of it each give an estimate: over the last `window` updates (follows a change), over the last
-    `long_window` (rides out a passing crisis) and over the learner's life (carries the slow fall of trial
-    lengths); the estimate is their geometric mean. A step at batch size n costs a + b ceil(n / devices): one
-    device's share of the learners plus a fixed cost, a = fixed_learners x b until two per-device sizes are
-    measured (`seconds_per_step`); a measured size costs the median of its last `recent_chunks` chunks, since the
-    chunk during which the next batch size compiles takes several times as long as the rest. No estimate is given
-    before it says that `min_done` of the run is done.
+    `long_window` (rides out a passing crisis) and over the learner's life (carries the slow fall of trial lengths);
+    the estimate is their geometric mean. Beside it, `band` is the range estimate x (1 +- width): the early width
+    until the estimate says that `late_from` of the run is done, the late one from then on. The widths are set by
+    replaying every committed run's metrics (tests/test_progress.py), where the truth strays from the estimate by up
+    to a third for long stretches as learners speed up or slow down; the spread of the three measures did not foretell
+    those errors, so it does not set the width.
+
+    A step at batch size n costs a + b ceil(n / devices): one device's share of the learners plus a fixed cost, a =
+    fixed_learners x b until two per-device sizes are measured (`seconds_per_step`); a measured size costs the
+    median of its last `recent_chunks` chunks, since the chunk during which the next batch size compiles takes
+    several times as long as the rest. No estimate is given before it says that `min_done` of the run is done.
     """
 
     def __init__(
@@ -91,6 +113,9 @@ class LearnerEta:
         fixed_learners: float = 3.5,
         min_done: float = 0.05,
         recent_chunks: int = 5,
+        early_width: float = 0.6,
+        late_width: float = 0.35,
+        late_from: float = 0.4,
     ):
         """Args:
         budget: trials per learner.
@@ -101,6 +126,9 @@ class LearnerEta:
           step for 8, 32 and 128 learners on 2 devices); far more on a GPU, where the fixed cost dominates.
         min_done: the share of the run, by its own estimate, before which none is given.
         recent_chunks: chunks of one batch size whose median step time prices it.
+        early_width, late_width: the band's half-width as a fraction of the estimate, before and from `late_from`
+          of the run by the estimate's own reckoning: 0.4, since the estimate runs up to a quarter long, so that the
+          band is narrow from the true half of every committed run on.
         """
         self.budget = budget
         self.devices = max(int(devices), 1)
@@ -111,13 +139,24 @@ class LearnerEta:
         self.start: float | None = None
         self.recent_chunks = recent_chunks
         self.step_times: dict[int, deque] = {}  # batch size -> seconds per step in its newest chunks
+        self.widths, self.late_from = (early_width, late_width), late_from
+        self.band: tuple[float, float] | None = None  # (low, high) [s] around the latest estimate; None without one
 
     def update(self, trials, steps, now: float, batch_size: int) -> float | None:
         """Record the learners' trials and steps after a chunk that ran `batch_size` learners, at time `now` [s].
 
         Returns the estimate [s], 0 when every learner is done, or None before two points, while an unfinished
-        learner has ended no trial in the window, or before min_done of the run.
+        learner has ended no trial in the window, or before min_done of the run; sets `band` to match.
         """
+        seconds = self._estimate(trials, steps, now, batch_size)
+        self.band = None
+        if seconds is not None:
+            elapsed = now - self.start
+            width = self.widths[int(elapsed >= self.late_from * (elapsed + seconds))]
+            self.band = (seconds * (1.0 - width), seconds * (1.0 + width))
+        return seconds
+
+    def _estimate(self, trials, steps, now: float, batch_size: int) -> float | None:
         trials = np.minimum(np.asarray(trials, dtype=np.float64), self.budget)
         steps = np.asarray(steps, dtype=np.float64)
         if self.history:

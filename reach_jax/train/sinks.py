@@ -70,7 +70,9 @@ class ProgressSink(Sink):
         """Redraw with the trials done and each condition's recent success rate."""
         trials = np.asarray(done.states.env.trials)
         left = self.eta.update(trials, done.states.counters.steps, time.monotonic(), done.ran)
-        self.bar.update(int(np.minimum(trials, self.budget).sum()), status_line(rows), eta=left)
+        self.bar.update(
+            int(np.minimum(trials, self.budget).sum()), status_line(rows), eta=left, eta_range=self.eta.band
+        )
 
     def close(self) -> None:
         """Draw the bar full and end its line."""
