@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -24,7 +24,8 @@ ADDED_CONFIG_FIELDS = {
             **{f"{name}_grid": [] for name in ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")},
         },
     },
-    7: {"train": {"zip_grids": False}, "claims": {"informative_networks": 4}},
+    7: {"train": {"zip_grids": False}},
+    8: {"claims": {"informative_networks": 4}},
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change

@@ -22,7 +22,7 @@ from reach_jax.config.tables import (
     ProtocolConfig,
 )
 
-CONFIG_VERSION = 7  # a stored config holds every field; versions 3-7 each added fields (`compat`)
+CONFIG_VERSION = 8  # a stored config holds every field; versions 3-8 each added fields (`compat`)
 
 
 @dataclass(frozen=True)
