@@ -162,7 +162,8 @@ def band_record(run: str) -> tuple[float, float]:
     """Replays a committed run at its fake clock: the share of the updates from a quarter of the run on whose true
     time left lies in the band (within one chunk's time), and the band's widest half-width from half of the run."""
     trials, steps, budget, _ = committed_profile(run)
-    assert (trials[-1] >= budget).all(), f"runs/{run} did not finish"
+    if not (trials[-1] >= budget).all():
+        pytest.skip(f"runs/{run} has not finished its trials")
     clock, sizes = fake_clock(run), batch_sizes(trials, budget)
     eta = LearnerEta(budget, devices=2)
     eta.update(np.zeros(trials.shape[1]), np.zeros(trials.shape[1]), 0.0, sizes[0])
@@ -181,8 +182,7 @@ def band_record(run: str) -> tuple[float, float]:
     return inside / judged, widest
 
 
-STOPPED_EARLY = {"dev_anneal"}  # stopped by hand at a third of its trials (its README): no end to count down to
-FINISHED_RUNS = [r for r in committed_runs() if r not in STOPPED_EARLY]
+FINISHED_RUNS = committed_runs()  # those still training, or stopped early (dev_anneal), are skipped: no end to count to
 # Where the truth strays from the estimate by more than the band for long, for reasons the trial lengths before it
 # do not show: dev_delayed's anneal to half the noise lengthens its trials after mid-run (the truth 30-40% over the
 # estimate from 25% to 75% of the run: inside the band in 73% of the updates), dev_gradual's trials lengthen in its
