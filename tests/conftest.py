@@ -124,6 +124,10 @@ def pytest_configure(config):
     one compilation cache."""
     distribute.add_xla_flags()
     _share_compilations(config)
+    # A suite started in the background (`nohup`, `cmd &`) inherits an ignored SIGINT, which the trainer rightly
+    # leaves ignored; its tests of Ctrl-C need the terminal's disposition, here and in the processes they start.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 # Every compiled program is kept, however small or quick: most of the suite's time is compiling the same small runs.

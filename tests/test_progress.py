@@ -218,6 +218,7 @@ def test_the_band_is_the_estimate_widened_early_and_narrowed_from_half_the_run()
     stalled = LearnerEta(1000, window=2)
     stalled.update([5.0], [100.0], 0.0, 1)
     assert stalled.update([5.0], [200.0], 1.0, 1) is None and stalled.band is None
+    assert eta.update([1000.0], [10000.0], 100.0, 1) == 0.0 and eta.band is None  # done: no "(0–0 s)" range
 
 
 @pytest.mark.parametrize("run", COMMITTED_RUNS)

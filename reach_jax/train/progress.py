@@ -146,11 +146,12 @@ class LearnerEta:
         """Record the learners' trials and steps after a chunk that ran `batch_size` learners, at time `now` [s].
 
         Returns the estimate [s], 0 when every learner is done, or None before two points, while an unfinished
-        learner has ended no trial in the window, or before min_done of the run; sets `band` to match.
+        learner has ended no trial in the window, or before min_done of the run; sets `band` to match (None when
+        there is no estimate or nothing is left).
         """
         seconds = self._estimate(trials, steps, now, batch_size)
         self.band = None
-        if seconds is not None:
+        if seconds:
             elapsed = now - self.start
             width = self.widths[int(elapsed >= self.late_from * (elapsed + seconds))]
             self.band = (seconds * (1.0 - width), seconds * (1.0 + width))

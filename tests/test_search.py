@@ -1,0 +1,176 @@
+"""studies/search: round 4's design, objective, next stage's pick and knob figure (studies/search/PLAN.md)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from reach_jax.config import hyper, loading
+from reach_jax.engine import batch
+
+ROOT = Path(__file__).resolve().parent.parent
+SEARCH = ROOT / "studies" / "search"
+
+
+@pytest.fixture
+def design(load_tool):
+    return load_tool("studies/search/design")
+
+
+@pytest.fixture
+def objective(load_tool):
+    return load_tool("studies/search/objective")
+
+
+@pytest.fixture
+def next_stage(load_tool):
+    return load_tool("studies/search/next_stage")
+
+
+@pytest.fixture
+def knobs(load_tool):
+    return load_tool("studies/search/knobs")
+
+
+def test_the_committed_design_is_what_the_script_writes_and_every_draw_is_in_its_range(design, tmp_path):
+    design.main(["--out", str(tmp_path / "stage1")])
+    for suffix in (".json", "_config.json"):
+        written = json.loads((tmp_path / f"stage1{suffix}").read_text())
+        committed = json.loads((SEARCH / f"stage1{suffix}").read_text())
+        written.pop("command", None), committed.pop("command", None)
+        assert written == committed, suffix
+    drawn = json.loads((SEARCH / "stage1.json").read_text())["draws"]
+    assert len(drawn) == design.DRAWS
+    for name, low, high, _ in design.SPACE:
+        values = [d["hypers"][name] for d in drawn]
+        assert all(low <= v <= high for v in values), name
+        assert len(set(values)) == len(values), name  # a Sobol design repeats no coordinate
+    units = np.array([d["unit"] for d in drawn])
+    # Space-filling: every knob's unit coordinates put one draw in each of 32 equal bins (a (0, m, d)-net's property).
+    assert all(sorted(np.floor(units[:, j] * 32).astype(int)) == list(range(32)) for j in range(units.shape[1]))
+
+
+def test_the_designs_config_trains_the_default_first_and_then_each_draw_point_by_point(design):
+    cfg = loading.from_partial(json.loads((SEARCH / "stage1_config.json").read_text()))
+    assert batch.n_sweep_points(cfg.train) == design.DRAWS + 1
+    drawn = json.loads((SEARCH / "stage1.json").read_text())["draws"]
+    for name, *_ in design.SPACE:
+        grid = getattr(cfg.train, f"{name}_grid")
+        assert grid[0] == hyper.BY_NAME[name].default
+        assert list(grid[1:]) == [d["hypers"][name] for d in drawn]
+
+
+def _cell(learning: str, test: str, success: float, out: float, paper=(0.5, 0.25)) -> dict:
+    return {
+        "learning": learning,
+        "test": test,
+        "success": {"mean": success},
+        "out": {"mean": out},
+        "mean_time_s": {"mean": 1.0},
+        "paper": None if paper is None else {"success": paper[0], "out": paper[1]},
+        "near_paper": {"success": True, "out": True},
+    }
+
+
+def test_distance_is_the_mean_over_the_papers_cells_of_both_gaps_in_points(objective):
+    cells = [_cell("none", "none", 0.6, 0.25), _cell("none", "viscous", 0.3, 0.55), _cell("x", "y", 0, 1, None)]
+    # (10 + 0) and (20 + 30) points over the two cells the paper has; the third has no paper value.
+    assert objective.distance(cells) == pytest.approx(30.0)
+
+
+def test_the_objective_gives_the_issues_numbers_from_the_committed_claims(objective):
+    # issue 38 computed these from the same files by its own arithmetic; a wrong D would not give all three.
+    for run, want in (("heldout", 24.4), ("dev_gain_half", 22.0), ("dev_delayed", 39.9)):
+        (rec,) = objective.records(ROOT / "runs" / run)
+        assert round(rec["D"], 1) == want, run
+
+
+def test_ties_within_half_a_point_go_to_the_stabler_recipe_then_the_simpler(objective):
+    recs = [
+        {"D": 10.0, "stable": 0.5, "knobs": ["lr"], "name": "a"},
+        {"D": 10.4, "stable": 1.0, "knobs": ["lr", "noise"], "name": "b"},
+        {"D": 10.3, "stable": 1.0, "knobs": ["lr"], "name": "c"},
+        {"D": 11.0, "stable": 1.0, "knobs": [], "name": "d"},
+    ]
+    assert [r["name"] for r in objective.ranked(recs)] == ["c", "b", "a", "d"]
+
+
+def _ranking(labels_and_d: list[tuple[dict, float]]) -> dict:
+    return {"ranked": [{"hypers": label, "D": d, "damping_none": 20.0 + d} for label, d in labels_and_d]}
+
+
+SPACE_DEFAULT = {n: hyper.BY_NAME[n].default for n in ("lr", "noise", "noise_corr", "drift_gate")}
+
+
+def _design(draws: list[dict]) -> dict:
+    return {
+        "space": [{"name": n, "low": 0, "high": 1, "scale": "linear"} for n in SPACE_DEFAULT],
+        "draws": [{"hypers": {**SPACE_DEFAULT, **d}} for d in draws],
+    }
+
+
+def _label(recipe: dict) -> dict:
+    """The recipe as claims.json names it: float32 values, those at their neutral value left out."""
+    return hyper.label({n: float(np.float32(v)) for n, v in {**SPACE_DEFAULT, **recipe}.items()})
+
+
+def test_the_next_stage_carries_the_best_draws_and_leaves_the_default_to_its_flag(next_stage, tmp_path):
+    draws = [{"lr": 0.7}, {"lr": 1.3, "noise_corr": 0.4}, {"noise": 0.25}, {"drift_gate": 0.1}]
+    design = tmp_path / "design.json"
+    design.write_text(json.dumps(_design(draws)))
+    ranked = [(_label(draws[2]), 12.0), (_label({}), 13.0), (_label(draws[1]), 13.1), (_label(draws[0]), 20.0)]
+    (tmp_path / "r.json").write_text(json.dumps(_ranking(ranked)))
+    argv = [str(tmp_path / "r.json"), "--design", str(design), "--best", "2", "--seeds", "4"]
+    assert next_stage.main([*argv, "--with-default", "--out", str(tmp_path / "s2")]) == 0
+    stage = json.loads((tmp_path / "s2.json").read_text())
+    assert [r["hypers"] for r in stage["recipes"]] == [
+        SPACE_DEFAULT,
+        {**SPACE_DEFAULT, **draws[2]},
+        {**SPACE_DEFAULT, **draws[1]},
+    ]
+    assert stage["default_rank"] == 2
+    cfg = loading.from_partial(json.loads((tmp_path / "s2_config.json").read_text()))
+    assert batch.n_sweep_points(cfg.train) == 3 and cfg.train.seeds == 4 and cfg.train.zip_grids
+    assert list(cfg.train.lr_grid) == [1.0, 1.0, 1.3] and list(cfg.train.noise_corr_grid) == [0.0, 0.0, 0.4]
+
+    # The pick: the best draw, since it ranks above the default; then the rule's end when the default leads.
+    assert next_stage.main([*argv[:4], "1", "--seeds", "8", "--out", str(tmp_path / "s3")]) == 0
+    assert json.loads((tmp_path / "s3.json").read_text())["recipes"][0]["hypers"] == {**SPACE_DEFAULT, **draws[2]}
+    (tmp_path / "r.json").write_text(json.dumps(_ranking([ranked[1], ranked[0], *ranked[2:]])))
+    assert next_stage.main([*argv[:4], "1", "--seeds", "8", "--out", str(tmp_path / "end")]) == next_stage.ROUND_ENDS
+    assert not (tmp_path / "end.json").exists()
+
+
+def test_a_ranked_recipe_that_names_no_design_recipe_is_an_error(next_stage):
+    recipes = next_stage.design_recipes(_design([{"lr": 0.7}]))
+    assert next_stage.match(_label({"lr": 0.7}), recipes) == 1
+    with pytest.raises(ValueError, match="0 design recipes"):
+        next_stage.match(_label({"lr": 0.8}), recipes)
+
+
+def test_the_knob_table_ranks_each_knob_against_d_and_the_damping(knobs, tmp_path):
+    labels = [_label({"lr": lr, "noise": noise}) for lr, noise in ((0.5, 0.3), (1.0, 0.1), (2.0, 0.2))]
+    ranking = {
+        "ranked": [
+            {"hypers": lab, "D": d, "damping_none": m}
+            for lab, d, m in zip(labels, (5, 9, 30), (40, 30, 10), strict=True)
+        ]
+    }
+    space = _design([])["space"][:2]
+    rows = {r["knob"]: r for r in knobs.table([ranking], space)}
+    assert rows["lr"]["rho_D"] == pytest.approx(1.0) and rows["lr"]["rho_damping"] == pytest.approx(-1.0)
+    assert rows["noise"]["rho_D"] == pytest.approx(-0.5)
+    (tmp_path / "r.json").write_text(json.dumps(ranking))
+    (tmp_path / "d.json").write_text(json.dumps({"space": space}))
+    knobs.main([str(tmp_path / "r.json"), "--design", str(tmp_path / "d.json"), "--out", str(tmp_path / "k")])
+    assert (tmp_path / "k.png").stat().st_size > 10_000
+    assert "| r | 3 | `lr` | +1.00 | -1.00 |" in (tmp_path / "k.md").read_text()
+
+
+def test_lambda_is_plotted_as_its_horizon(knobs):
+    assert math.isclose(knobs.plotted({"lam": 0.99}, {"name": "lam", "scale": "log1m"}), 100.0, rel_tol=1e-9)
+    assert knobs.plotted({}, {"name": "noise_corr", "scale": "linear"}) == 0.0
