@@ -22,6 +22,7 @@ from reach_jax.config import hyper
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib import ticker  # noqa: E402
 
 SCRIPT = "studies/search/knobs.py"
 FIELD_UNSTABLE = 15.9  # the viscous field's push along its unstable axis [N s/m] (docs/model.md §6)
@@ -69,11 +70,21 @@ def figure(rankings: list[dict], names: list[str], space: list[dict], path: Path
             recs = ranking["ranked"]
             x = [plotted(r["hypers"], s) for r in recs]
             ys = ([r["D"] for r in recs], [np.nan if r["damping_none"] is None else r["damping_none"] for r in recs])
+            is_default = [not r["knobs"] for r in recs]  # no knob off its default
             for row, y in enumerate(ys):
-                axes[row, j].plot(x, y, MARKERS[k % len(MARKERS)], ms=4, mfc="none", label=name if j == 0 else None)
+                marker = MARKERS[k % len(MARKERS)]
+                axes[row, j].plot(x, y, marker, ms=4, mfc="none", label=name if j == 0 else None)
+                # The default filled, so that every panel shows where it sits.
+                xd = [xi for xi, d in zip(x, is_default, strict=True) if d]
+                yd = [yi for yi, d in zip(y, is_default, strict=True) if d]
+                label = "the default" if j == k == 0 else None
+                axes[row, j].plot(xd, yd, marker, ms=5, color="k", label=label if xd else None)
         if s["scale"] != "linear":
             for row in range(2):
                 axes[row, j].set_xscale("log")
+                axes[row, j].xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+                axes[row, j].xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+                axes[row, j].xaxis.set_minor_formatter(ticker.NullFormatter())
         axes[1, j].axhline(FIELD_UNSTABLE, color="0.5", lw=0.8, ls="--")
         axes[1, j].set_xlabel(s["name"] + (": 1/(1−λ)" if s["scale"] == "log1m" else ""), fontsize=8)
         for row in range(2):
