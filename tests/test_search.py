@@ -156,7 +156,7 @@ def test_the_knob_table_ranks_each_knob_against_d_and_the_damping(knobs, tmp_pat
     labels = [_label({"lr": lr, "noise": noise}) for lr, noise in ((0.5, 0.3), (1.0, 0.1), (2.0, 0.2))]
     ranking = {
         "ranked": [
-            {"hypers": lab, "D": d, "damping_none": m}
+            {"hypers": lab, "D": d, "damping_none": m, "knobs": ["lr", "noise"]}  # as objective.py writes them
             for lab, d, m in zip(labels, (5, 9, 30), (40, 30, 10), strict=True)
         ]
     }
