@@ -174,3 +174,45 @@ def test_the_knob_table_ranks_each_knob_against_d_and_the_damping(knobs, tmp_pat
 def test_lambda_is_plotted_as_its_horizon(knobs):
     assert math.isclose(knobs.plotted({"lam": 0.99}, {"name": "lam", "scale": "log1m"}), 100.0, rel_tol=1e-9)
     assert knobs.plotted({}, {"name": "noise_corr", "scale": "linear"}) == 0.0
+
+
+@pytest.fixture
+def verdict(load_tool):
+    return load_tool("studies/search/verdict")
+
+
+def _record(d, cells_near=5, success=0.55, out=0.30, verdicts="holds"):
+    return {
+        "run": "runs/x",
+        "D": d,
+        "stable": 1.0,
+        "cells_near": cells_near,
+        "none_viscous": {"success": success, "out": out},
+        "verdicts": {k: verdicts for k in range(1, 6)},
+    }
+
+
+def test_the_held_out_verdict_beats_the_default_only_below_its_d_and_decides_each_target(verdict):
+    default = _record(24.4, cells_near=3, success=0.94, out=0.02)
+    met = verdict.decide(_record(12.2), default, in_range=True)
+    assert met["beats_default"] and all(met["targets"].values())
+    assert not verdict.decide(_record(24.4), default, True)["beats_default"]  # a tie keeps the default
+    missed = verdict.decide(
+        _record(12.3, cells_near=4, success=0.66, out=0.24, verdicts="holds in part"), default, False
+    )
+    assert missed["beats_default"] and not any(missed["targets"].values())
+    assert not verdict.decide(_record(10.0, success=0.44), default, True)["targets"][
+        "none -> viscous within 10 points of 55% success with at least 25% out"
+    ]
+
+
+def test_the_held_out_verdict_reads_the_committed_runs_and_checks_every_interval(verdict, tmp_path):
+    verdict.main([str(ROOT / "runs/heldout"), "--default", str(ROOT / "runs/heldout"), "--out", str(tmp_path / "v")])
+    result = json.loads((tmp_path / "v.json").read_text())
+    assert result["pick"]["D"] == pytest.approx(24.4, abs=0.05) and not result["beats_default"]
+    assert result["targets"]["every interval in range"]
+    claims = json.loads((ROOT / "runs/heldout/eval/claims.json").read_text())
+    claims["recipes"][0]["cells"][0]["mean_time_s"]["low"] = -0.1  # a negative time
+    (tmp_path / "run" / "eval").mkdir(parents=True)
+    (tmp_path / "run" / "eval" / "claims.json").write_text(json.dumps(claims))
+    assert not verdict.intervals_in_range(tmp_path / "run")
