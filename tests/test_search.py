@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 
 from reach_jax.config import hyper, loading
 from reach_jax.engine import batch
+from reach_jax.store import run_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 SEARCH = ROOT / "studies" / "search"
@@ -87,6 +89,18 @@ def test_the_objective_gives_the_issues_numbers_from_the_committed_claims(object
     for run, want in (("heldout", 24.4), ("dev_gain_half", 22.0), ("dev_delayed", 39.9)):
         (rec,) = objective.records(ROOT / "runs" / run)
         assert round(rec["D"], 1) == want, run
+
+
+def test_a_run_is_ranked_only_once_every_learner_has_trained_its_budget(objective, tmp_path, capsys):
+    # runs/search_stage2 as a machine restart left it: its chunk-418 checkpoint, 3 random-force learners short.
+    assert objective.short_learners(ROOT / "runs" / "search_stage2") == []
+    for name in ("config.json", "metrics.jsonl.gz"):
+        shutil.copy(ROOT / "runs" / "search_stage2" / name, tmp_path / name)
+    run_dir.truncate_metrics(tmp_path, 418)
+    assert objective.short_learners(tmp_path) == [44, 45, 55]
+    with pytest.raises(SystemExit, match="has not finished: 3 learners below its trial budget"):
+        objective.main([str(tmp_path)])
+    assert capsys.readouterr().out == ""
 
 
 def test_ties_within_half_a_point_go_to_the_stabler_recipe_then_the_simpler(objective):

@@ -223,10 +223,12 @@ def figure(rows: list[dict], networks: list[dict]):
     """Four panels against the no-field networks' damping: per recipe, none -> viscous success, the random-force
     learners' stability, their damping (filled: every no-field learner of the recipe stable; open: not); per
     network, the field's cost to it."""
-    fig, axes = plt.subplots(1, 4, figsize=(17, 4.2))
+    fig, axes = plt.subplots(1, 4, figsize=(17, 4.8))
     points = [r for r in rows if r["damping"].get("none") is not None]
     runs = sorted({r["run"] for r in points})
+    # Ten colours by four shapes tell up to 40 runs apart.
     colours = {run: plt.cm.tab10(i % 10) for i, run in enumerate(runs)}
+    shapes = {run: "o^sD"[i // 10 % 4] for i, run in enumerate(runs)}
     panels = (
         ("none → viscous success [%]", lambda r: r["none_viscous_success"], 100.0, 100 * PAPER_NONE_VISCOUS),
         ("random-force learners stable late in training [%]", lambda r: _stable_share(r, True), 100.0, None),
@@ -239,16 +241,25 @@ def figure(rows: list[dict], networks: list[dict]):
                 continue
             calm = _stable_share(r, False) == 1.0
             face = colours[r["run"]] if calm else "none"
-            ax.scatter(r["damping"]["none"], scale * y, facecolors=face, edgecolors=colours[r["run"]], s=30, zorder=3)
+            ax.scatter(
+                r["damping"]["none"],
+                scale * y,
+                facecolors=face,
+                edgecolors=colours[r["run"]],
+                marker=shapes[r["run"]],
+                s=30,
+                zorder=3,
+            )
         ax.axvline(FIELD_UNSTABLE, color="0.5", ls="--", lw=1)
         if paper is not None:
             ax.axhline(paper, color="tab:red", ls=":", lw=1)
         ax.set_xlabel("no-field networks' damping, unstable axis [N s/m]")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-    for run in runs:
-        axes[0].scatter([], [], color=colours[run], label=run.replace("runs/", ""))
-    axes[0].legend(fontsize=7, loc="lower right")
+    handles = [
+        axes[0].scatter([], [], color=colours[run], marker=shapes[run], label=run.replace("runs/", "")) for run in runs
+    ]
+    fig.legend(handles=handles, fontsize=7, loc="lower center", ncol=min(len(runs), 12), frameon=False)
     axes[0].text(FIELD_UNSTABLE, 0.02, " field +15.9", fontsize=7, color="0.4", transform=axes[0].get_xaxis_transform())
     ax = axes[3]
     for full, colour, label in ((False, "0.6", "screens (under 2M trials)"), (True, "tab:blue", "full length (2M)")):
@@ -272,7 +283,7 @@ def figure(rows: list[dict], networks: list[dict]):
         " one per no-field network)",
         fontsize=10,
     )
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.04 * (1 + (len(runs) - 1) // 12), 1, 1))
     return fig
 
 

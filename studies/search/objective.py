@@ -18,6 +18,7 @@ import math
 from pathlib import Path
 
 from reach_jax.config import hyper
+from reach_jax.store import run_dir
 
 SCRIPT = "studies/search/objective.py"
 TIE_POINTS = 0.5  # recipes whose D differ by less than this are tied (PLAN.md)
@@ -34,6 +35,24 @@ def distance(cells: list[dict]) -> float:
 def knobs_changed(hypers: dict) -> list[str]:
     """The hyperparameters of a recipe away from their defaults (values read back as float32)."""
     return [k for k, v in hypers.items() if not math.isclose(v, hyper.BY_NAME[k].default, rel_tol=1e-6, abs_tol=1e-9)]
+
+
+def short_learners(run: Path) -> list[int]:
+    """The learners of a run that ended below its trial budget (PLAN.md ranks a run only at its full length)."""
+    budget = float(run_dir.read_config(run).train.trials)
+    trials: dict[int, float] = {}
+    for row in run_dir.read_metrics(run):
+        trials[row["learner"]] = max(trials.get(row["learner"], 0.0), row["trials"])
+    return sorted(k for k, t in trials.items() if t < budget)
+
+
+def require_finished(run: Path) -> None:
+    """Exits with a one-line error when a run has learners below its trial budget."""
+    if short := short_learners(run):
+        raise SystemExit(
+            f"{SCRIPT}: {run} has not finished: {len(short)} learners below its trial budget (first: {short[0]});"
+            f" resume it with python -m reach_jax.train --resume {run}, then evaluate it again"
+        )
 
 
 def records(run: Path) -> list[dict]:
@@ -116,6 +135,8 @@ def main(argv=None) -> None:
     p.add_argument("runs", nargs="+", type=Path, help="evaluated runs whose recipes are ranked together")
     p.add_argument("--out", type=Path, help="writes OUT.md and OUT.json")
     args = p.parse_args(argv)
+    for run in args.runs:
+        require_finished(run)
     recs = ranked([r for run in args.runs for r in records(run)])
     command = f"python {SCRIPT} " + " ".join(map(str, args.runs)) + (f" --out {args.out}" if args.out else "")
     text = markdown(recs, command)

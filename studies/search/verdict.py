@@ -97,6 +97,8 @@ def main(argv=None) -> None:
     p.add_argument("--out", type=Path, help="writes OUT.md and OUT.json")
     args = p.parse_args(argv)
     objective = _objective()
+    for run in (args.run, args.default):
+        objective.require_finished(run)
     (pick,), (default,) = objective.records(args.run), objective.records(args.default)
     result = decide(pick, default, intervals_in_range(args.run))
     command = f"python {SCRIPT} {args.run} --default {args.default}" + (f" --out {args.out}" if args.out else "")
