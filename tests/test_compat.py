@@ -76,9 +76,27 @@ def test_version_1_fields_added_since_read_as_what_those_runs_trained_with():
     del stored["learner"]["noise_corr"]  # came in neutral
     cfg = from_dict(stored)
     assert cfg.task.drift_neutral_when_full is False
-    assert cfg.learner.noise_corr == Config().learner.noise_corr
+    assert cfg.learner.noise_corr == 0.0 != Config().learner.noise_corr  # white, as before version 9's default
     stored["task"]["drift_neutral_when_full"] = True
+    assert from_dict(stored) == Config(learner=LearnerConfig(noise_corr=0.0))
+
+
+def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_before():
+    """Version 9 made round 4's pick the default; a version-1 config without those fields trained the old recipe."""
+    old = compat.CHANGED_DEFAULTS[9]
+    stored = {**to_dict(Config()), "version": 1}
+    for section, fields in old.items():
+        for name in fields:
+            del stored[section][name]
+    cfg = from_dict(stored)
+    for section, fields in old.items():
+        for name, value in fields.items():
+            assert getattr(getattr(cfg, section), name) == value != getattr(getattr(Config(), section), name), name
+    stored = {**to_dict(Config()), "version": 8}  # complete: its stored values stand, whatever the defaults
     assert from_dict(stored) == Config()
+    del stored["learner"]["lr"]
+    with pytest.raises(ValueError, match="^learner.lr: missing"):
+        from_dict(stored)
 
 
 @pytest.mark.parametrize(
@@ -93,11 +111,12 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7 or 8, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8 or 9, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
 
 
 LEVERS_6 = ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")  # hyperparameters of version 6
+OFF_6 = {"actor_signal_gain": 1.0, "drift_gate": 0.0}  # what a config of version 5 or earlier trained with
 
 
 def _as_version_5(stored: dict) -> dict:
@@ -116,11 +135,11 @@ def test_versions_2_and_3_gain_the_fields_added_since_at_the_values_that_keep_th
     assert cfg.learner.noise_value_gate == 0.0 and cfg.train.noise_value_gate_grid == ()
     assert cfg.learner.noise_value_steps == 0 and cfg.train.noise_value_steps_grid == ()
     assert cfg.learner.actor_gain_power == 0.0 and cfg.train.actor_gain_power_grid == ()
-    assert cfg == Config(learner=LearnerConfig(noise_value_ratio=0.5))
+    assert cfg == Config(learner=LearnerConfig(noise_value_ratio=0.5, **OFF_6))
     stored = _as_version_5({**to_dict(Config(learner=LearnerConfig(noise_value_gate=0.1))), "version": 3})
     for name in ("noise_value_steps", "actor_gain_power"):
         del stored["learner"][name], stored["train"][f"{name}_grid"]
-    assert from_dict(stored) == Config(learner=LearnerConfig(noise_value_gate=0.1))
+    assert from_dict(stored) == Config(learner=LearnerConfig(noise_value_gate=0.1, **OFF_6))
     del stored["learner"]["noise_corr"]  # version 3 stored every field of its own
     with pytest.raises(ValueError, match="^learner.noise_corr: missing"):
         from_dict(stored)
@@ -132,7 +151,7 @@ def test_version_5_gains_the_drift_gate_n_max_rule_and_actor_gain_switched_off()
     assert (cfg.learner.drift_gate, cfg.learner.n_max_clean, cfg.learner.actor_signal_gain) == (0.0, 0.0, 1.0)
     assert cfg.learner.drift_gate_trials == 300 and cfg.task.drift_gate_start == 1.0
     assert cfg.train.saturated_output == 0.45 and all(getattr(cfg.train, f"{n}_grid") == () for n in LEVERS_6)
-    assert cfg == Config(learner=LearnerConfig(actor_gain_power=2.0))
+    assert cfg == Config(learner=LearnerConfig(actor_gain_power=2.0, **OFF_6))
     stored = {**to_dict(Config()), "version": 6}
     del stored["learner"]["drift_gate"]  # version 6 stores them
     with pytest.raises(ValueError, match="^learner.drift_gate: missing"):

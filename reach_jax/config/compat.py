@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -26,6 +26,26 @@ ADDED_CONFIG_FIELDS = {
     },
     7: {"train": {"zip_grids": False}},
     8: {"claims": {"informative_networks": 4}},
+}
+
+# Defaults changed with a config version, at their values before it: a version-1 config, which left out the
+# fields added during its life, trained with these where it lacks them. Version 9 made round 4's held-out pick the
+# default recipe (model §11).
+CHANGED_DEFAULTS = {
+    9: {
+        "learner": {
+            "lr": 1.0,
+            "noise": 0.2,
+            "lam": 0.999,
+            "noise_final_ratio": 1.0,
+            "noise_anneal_delay": 0,
+            "noise_value_ratio": 1.0,
+            "noise_corr": 0.0,
+            "actor_signal_gain": 1.0,
+            "drift_gate": 0.0,
+        },
+        "task": {"max_trial_time": 10.0},
+    },
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
@@ -96,16 +116,26 @@ def migrate_config(data: dict, version: int) -> dict:
     keeps the earlier behaviour, and `config.from_dict` fills it so, except `task.drift_neutral_when_full`, which
     came in switched on: a config without it trained under the old staircase, so it reads as False. Version 1 also
     covers the speed fields dropped since (RETIRED_FIELDS) and the `force` section of the time before conditions
-    were data. A complete config of an older version gains the fields of each later one (ADDED_CONFIG_FIELDS).
+    were data. A complete config of an older version gains the fields of each later one (ADDED_CONFIG_FIELDS), and
+    a version-1 config reads a field whose default changed since, where it lacks it, as before (CHANGED_DEFAULTS).
     """
     if version == 1:
         data = _migrate_version_1(data)
     for since, sections in ADDED_CONFIG_FIELDS.items():
         if FIRST_COMPLETE_CONFIG <= version < since:
-            for name, added in sections.items():
-                section = data.get(name, {})
-                if isinstance(section, dict):
-                    data = {**data, name: {**added, **section}}
+            data = _fill(data, sections)
+    if version < FIRST_COMPLETE_CONFIG:  # later versions store every field; a missing one stays an error
+        for sections in CHANGED_DEFAULTS.values():  # oldest first: the first fill of a field stands
+            data = _fill(data, sections)
+    return data
+
+
+def _fill(data: dict, sections: dict) -> dict:
+    """data with each field of `sections` ({section: {field: value}}) that it lacks added at the value given."""
+    for name, fields in sections.items():
+        section = data.get(name, {})
+        if isinstance(section, dict):
+            data = {**data, name: {**fields, **section}}
     return data
 
 
