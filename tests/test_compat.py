@@ -11,6 +11,7 @@ from reach_jax.config import (
     compat,
     from_dict,
     from_partial,
+    hyper,
     to_dict,
     with_defaults,
 )
@@ -92,6 +93,9 @@ def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_
     for section, fields in old.items():
         for name, value in fields.items():
             assert getattr(getattr(cfg, section), name) == value != getattr(getattr(Config(), section), name), name
+    as_of = {v: {n: getattr(c, n) for n in hyper.NAMES} for v, c in ((8, cfg.learner), (9, Config().learner))}
+    assert hyper.defaults(8) == {**hyper.defaults(), **old["learner"]} == as_of[8]
+    assert hyper.defaults(9) == hyper.defaults() == as_of[9]
     stored = {**to_dict(Config()), "version": 8}  # complete: its stored values stand, whatever the defaults
     assert from_dict(stored) == Config()
     del stored["learner"]["lr"]

@@ -11,7 +11,17 @@ import numpy as np
 import pytest
 
 from reach_jax import errors, evaluate
-from reach_jax.config import PAPER_CONDITIONS, Config, TaskConfig, condition, from_dict, from_partial, to_dict
+from reach_jax.config import (
+    PAPER_CONDITIONS,
+    Config,
+    LearnerConfig,
+    TaskConfig,
+    compat,
+    condition,
+    from_dict,
+    from_partial,
+    to_dict,
+)
 from reach_jax.env import task
 from reach_jax.evaluate import claims
 from reach_jax.store import run_dir as run_dir_io
@@ -35,9 +45,11 @@ def test_a_user_condition_is_added_to_the_paper_four_and_round_trips():
 
 def test_a_stored_force_section_becomes_the_paper_conditions_fields():
     # Configs written before conditions were data held the viscous matrix and the random bound in `force`; they
-    # came before the drift-neutral staircase too.
+    # came before the drift-neutral staircase and the recipe of config version 9 too.
     old = {"version": 1, "force": {"viscous": [[-10.1, -11.2], [-11.2, 11.1]], "random_amplitude": 8.0}}
-    assert from_dict(old) == dataclasses.replace(Config(), task=TaskConfig(drift_neutral_when_full=False))
+    then = compat.CHANGED_DEFAULTS[9]
+    task_then = TaskConfig(drift_neutral_when_full=False, **then["task"])
+    assert from_dict(old) == dataclasses.replace(Config(), learner=LearnerConfig(**then["learner"]), task=task_then)
     changed = from_dict({"version": 1, "force": {"random_amplitude": 5.0}})
     assert condition(changed, "random").random == (5.0, 5.0) == condition(changed, "random_nopast").random
 

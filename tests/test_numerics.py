@@ -19,7 +19,7 @@ from conftest import default_hyper
 
 from reach_jax import env
 from reach_jax.agent import exploration, learner, network
-from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, condition, from_partial
+from reach_jax.config import ConditionConfig, Config, NetworkConfig, TaskConfig, compat, condition, from_partial
 from reach_jax.engine import random_stream, rollout
 from reach_jax.engine.chunk import make_trace
 from reach_jax.engine.learner_state import init_learner
@@ -676,9 +676,13 @@ LEVERS = {"drift_gate": 0.6, "drift_gate_trials": 2, "n_max_clean": 1.0, "actor_
 LEVERS_TASK = {"drift_gate_start": 0.5, "drift_after": 0.4, "drift_per_step": 0.004}
 
 
+# Eq. 2 with white noise, every form off: the recipe before config version 9 (its task values are ROLLOUT_CFG's).
+EQ2_WHITE = compat.CHANGED_DEFAULTS[9]["learner"]
+
+
 @pytest.mark.parametrize(
     ("forms", "task_forms", "seeds"),
-    [({}, {}, ROLLOUT_SEEDS), (EXPLORATION_FORMS, {}, ROLLOUT_SEEDS), (LEVERS, LEVERS_TASK, (4, 5))],
+    [(EQ2_WHITE, {}, ROLLOUT_SEEDS), (EXPLORATION_FORMS, {}, ROLLOUT_SEEDS), (LEVERS, LEVERS_TASK, (4, 5))],
     ids=["eq2-white-noise", "exploration-forms", "drift-and-actor-levers"],
 )
 def test_rollout_replays_in_oracle(forms, task_forms, seeds):

@@ -62,7 +62,7 @@ def test_the_designs_config_trains_the_default_first_and_then_each_draw_point_by
     drawn = json.loads((SEARCH / "stage1.json").read_text())["draws"]
     for name, *_ in design.SPACE:
         grid = getattr(cfg.train, f"{name}_grid")
-        assert grid[0] == hyper.BY_NAME[name].default
+        assert grid[0] == design.ROUND_DEFAULTS[name] == hyper.defaults(8)[name]  # the default of the round's time
         assert list(grid[1:]) == [d["hypers"][name] for d in drawn]
 
 
@@ -117,7 +117,7 @@ def _ranking(labels_and_d: list[tuple[dict, float]]) -> dict:
     return {"ranked": [{"hypers": label, "D": d, "damping_none": 20.0 + d} for label, d in labels_and_d]}
 
 
-SPACE_DEFAULT = {n: hyper.BY_NAME[n].default for n in ("lr", "noise", "noise_corr", "drift_gate")}
+SPACE_DEFAULT = {n: hyper.defaults(8)[n] for n in ("lr", "noise", "noise_corr", "drift_gate")}  # the round's default
 
 
 def _design(draws: list[dict]) -> dict:

@@ -21,6 +21,7 @@ from reach_jax.config import (
     LearnerConfig,
     TaskConfig,
     TrainConfig,
+    compat,
     hyper,
     n_inputs,
     n_past_inputs,
@@ -36,6 +37,7 @@ from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import cli as train_cli
 
 CFG = Config()
+EQ2 = dataclasses.replace(CFG, learner=LearnerConfig(**compat.CHANGED_DEFAULTS[9]["learner"]))  # every form off
 
 
 def without_stats(states):
@@ -199,7 +201,7 @@ def test_draws_do_not_depend_on_how_steps_are_split():
 
 
 def test_exploration_forms_at_their_neutral_values_are_white_noise_bit_for_bit():
-    h = default_hyper(CFG)
+    h = default_hyper(EQ2)
     unit = jax.random.uniform(jax.random.PRNGKey(0), (500, 2), minval=-1.0, maxval=1.0)
     p = jax.random.uniform(jax.random.PRNGKey(1), (500,), minval=-0.5, maxval=0.5)
     prev = jax.random.uniform(jax.random.PRNGKey(2), (500, 2), minval=-0.2, maxval=0.2)
@@ -214,7 +216,7 @@ def test_exploration_forms_at_their_neutral_values_are_white_noise_bit_for_bit()
 
 
 def test_exploration_scales_with_the_critics_value_and_rests_on_quiet_trials():
-    h = default_hyper(CFG)._replace(
+    h = default_hyper(EQ2)._replace(
         noise_value_ratio=jnp.asarray(0.25), noise_value_hi=jnp.asarray(0.3), noise_value_lo=jnp.asarray(0.1)
     )
     scale = jax.jit(lambda p, full_at, h=h: exploration.value_scale(h, p, full_at))
@@ -263,7 +265,7 @@ def test_correlated_exploration_keeps_the_spread_of_white_noise():
 
 
 def test_exploration_anneals_once_the_curriculum_is_full():
-    lc = LearnerConfig(noise=0.2, noise_final_ratio=0.5, noise_anneal_trials=1000)
+    lc = LearnerConfig(noise=0.2, noise_final_ratio=0.5, noise_anneal_delay=0, noise_anneal_trials=1000)
     hyper = default_hyper(dataclasses.replace(CFG, learner=lc))
     bound = jax.jit(lambda t, f, h=hyper: exploration.schedule(h, t, f))
     assert float(bound(5000, -1)) == pytest.approx(0.2)  # curriculum not full yet: no anneal, however long
@@ -299,7 +301,7 @@ def test_exploration_anneals_once_the_curriculum_is_full():
 
     # The rollout explores within the annealed bound: full from the start, halved after one trial.
     annealed = dataclasses.replace(
-        full_cfg, learner=dataclasses.replace(full_cfg.learner, noise_final_ratio=0.5, noise_anneal_trials=1)
+        full_cfg, learner=dataclasses.replace(EQ2.learner, noise_final_ratio=0.5, noise_anneal_trials=1)
     )
     start = init_learner(jax.random.PRNGKey(0), cond, annealed)
     start = start.replace(env=start.env.replace(trials=jnp.asarray(1, jnp.int32)))
@@ -507,12 +509,12 @@ def test_a_sweep_is_one_batch_of_learners_with_their_own_anneal(tmp_path):
 def test_metrics_rows_read_the_batchs_hyperparameters_spelled_as_the_config():
     cfg = tiny(seeds=2, conditions=("none",))
     group = batch.init_batch(cfg)
-    hypers = group.hypers._replace(noise=jnp.asarray([0.2, 0.35], jnp.float32))
+    hypers = group.hypers._replace(noise=jnp.asarray([0.213, 0.35], jnp.float32))
     rows = train.metrics_rows(jax.device_get(group.states), hypers, batch.learner_table(cfg.train), 1, 0.0, cfg)
-    assert [r["noise"] for r in rows] == [0.2, 0.35]  # the batch's, not the config's 0.2 twice
+    assert [r["noise"] for r in rows] == [0.213, 0.35]  # the batch's, not the config's 0.213 twice
     assert rows[1]["exploration"] == 0.35  # not annealed yet: the batch's bound, at its float32 precision
     first = json.dumps({k: rows[0][k] for k in hyper.NAMES})
-    assert first == json.dumps(batch.learner_hypers(cfg)[0])  # 0.2 and 300000, not 0.20000000298 or 300000.0
+    assert first == json.dumps(batch.learner_hypers(cfg)[0])  # 0.213 and 300000, not 0.21299999952 or 300000.0
 
 
 def test_chunk_members_shrink_to_the_unfinished_learners():

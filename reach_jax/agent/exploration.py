@@ -95,4 +95,6 @@ def noise(unit: jax.Array, h: Hyper, trials: jax.Array, full_at: jax.Array, scal
     """
     silent = quiet(h, trials)
     b = jnp.where(silent, 0.0, schedule(h, trials, full_at) * scale)
-    return jnp.where(silent, 0.0, h.noise_corr * prev), jnp.sqrt(1.0 - h.noise_corr**2) * b * unit
+    # A bare product: with a select between rho * prev and the actor's m + carried, XLA:CPU contracted the two into
+    # an FMA in some batch shapes and not in others, so a learner's bits depended on its batch. At rho = 0 both are m.
+    return jnp.where(silent, 0.0, h.noise_corr) * prev, jnp.sqrt(1.0 - h.noise_corr**2) * b * unit

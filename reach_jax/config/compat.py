@@ -130,6 +130,15 @@ def migrate_config(data: dict, version: int) -> dict:
     return data
 
 
+def defaults_of(version: int, section: str, defaults: dict) -> dict:
+    """`defaults` ({field: today's default}) of a config section as they were at config version `version`."""
+    values = dict(defaults)
+    for since in sorted(CHANGED_DEFAULTS, reverse=True):  # newest first: the value before the first change stands
+        if version < since:
+            values.update((k, v) for k, v in CHANGED_DEFAULTS[since].get(section, {}).items() if k in values)
+    return values
+
+
 def _fill(data: dict, sections: dict) -> dict:
     """data with each field of `sections` ({section: {field: value}}) that it lacks added at the value given."""
     for name, fields in sections.items():

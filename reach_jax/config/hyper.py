@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from reach_jax.config import compat
 from reach_jax.config.hyperparameter import Hyperparameter
 
 TABLE = (
@@ -196,6 +197,12 @@ Hyper = NamedTuple("Hyper", [(h.name, Any) for h in TABLE])
 Hyper.__doc__ = "Per-learner learning constants, one () array each (a sweep is just a batch of learners)."
 
 
+def defaults(version: int | None = None) -> dict[str, float]:
+    """Every hyperparameter's default, as at config `version` when given (`compat.CHANGED_DEFAULTS`)."""
+    today = {h.name: h.default for h in TABLE}
+    return today if version is None else compat.defaults_of(version, "learner", today)
+
+
 def lookup(name: str) -> Hyperparameter:
     """The entry called `name`; raises ValueError naming the closest name when there is none."""
     if name in BY_NAME:
@@ -247,21 +254,24 @@ def label(values: dict[str, float]) -> dict[str, float]:
     }
 
 
-def describe(values: dict[str, float]) -> str:
-    """A recipe in words: its bound, then each hyperparameter set away from its default (one that shapes another's
+def describe(values: dict[str, float], baseline: dict[str, float] | None = None) -> str:
+    """A recipe in words: its bound, then each hyperparameter set away from the baseline (one that shapes another's
     form only while that one is on), in table order.
 
     Args:
         values: hyperparameter name -> value, such as a recipe's label (`label`) in `eval/claims.json`.
+        baseline: name -> value that goes unsaid; today's defaults when None (`defaults(version)` for a study's).
     """
-    words = [BY_NAME["noise"].words.format(v=values.get("noise", BY_NAME["noise"].default))]
+    baseline = defaults() if baseline is None else baseline
+    words = [BY_NAME["noise"].words.format(v=values.get("noise", baseline["noise"]))]
     for h in TABLE:
-        if h.name == "noise" or not _set(values, h) or (h.part_of and not _set(values, BY_NAME[h.part_of])):
+        part_of = h.part_of and BY_NAME[h.part_of]
+        if h.name == "noise" or not _set(values, h, baseline) or (part_of and not _set(values, part_of, baseline)):
             continue
         words.append(h.words.format(v=values[h.name]))
     return "; ".join(words)
 
 
-def _set(values: dict[str, float], h: Hyperparameter) -> bool:
-    """Whether `values` sets h away from its default (at float32 precision, as a batch stores it)."""
-    return h.name in values and np.float32(values[h.name]) != np.float32(h.default)
+def _set(values: dict[str, float], h: Hyperparameter, baseline: dict[str, float]) -> bool:
+    """Whether `values` sets h away from the baseline (at float32 precision, as a batch stores it)."""
+    return h.name in values and np.float32(values[h.name]) != np.float32(baseline[h.name])

@@ -23,6 +23,8 @@ from pathlib import Path
 
 from reach_jax.config import hyper
 
+ROUND_DEFAULTS = hyper.defaults(8)  # the default recipe while the rounds ran: config version 8, before round 4's pick
+
 SCRIPT = "studies/exploration/choose_recipe.py"  # how its outputs name the command that made them
 
 FULL_TRIALS = 2_000_000  # a full-length run (the paper's trials per network)
@@ -36,7 +38,7 @@ def forms_changed(hypers: dict) -> list[str]:
     return [
         name
         for name, value in hypers.items()
-        if not math.isclose(value, hyper.BY_NAME[name].default, rel_tol=1e-6, abs_tol=1e-9)
+        if not math.isclose(value, ROUND_DEFAULTS[name], rel_tol=1e-6, abs_tol=1e-9)
     ]
 
 

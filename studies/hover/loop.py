@@ -28,6 +28,7 @@ from reach_jax.engine import batch
 from reach_jax.evaluate import verdicts
 from reach_jax.store import run_dir as run_dir_io
 
+ROUND_DEFAULTS = hyper.defaults(8)  # recipes are worded against the defaults of the rounds: config version 8
 SCRIPT = "studies/hover/loop.py"  # how its outputs name the command that made them
 
 # Chunk rates averaged over a learner's tail, each chunk weighted by the trials it ended.
@@ -61,7 +62,7 @@ def run_groups(run: Path) -> list[dict]:
         by_learner.setdefault(r["learner"], []).append(r)
     groups: dict[tuple, list[int]] = {}
     for i, (name, _) in enumerate(table):
-        groups.setdefault((hyper.describe(hypers[i]), name), []).append(i)
+        groups.setdefault((hyper.describe(hypers[i], ROUND_DEFAULTS), name), []).append(i)
     recipes = list(dict.fromkeys(recipe for recipe, _ in groups))  # in sweep order
     out = []
     for (recipe, condition), learners in sorted(groups.items(), key=lambda g: recipes.index(g[0][0])):

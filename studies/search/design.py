@@ -19,6 +19,8 @@ from scipy.stats import qmc
 
 from reach_jax.config import hyper
 
+ROUND_DEFAULTS = hyper.defaults(8)  # the default recipe while the rounds ran: config version 8, before round 4's pick
+
 SCRIPT = "studies/search/design.py"
 
 # (hyperparameter, low, high, scale): the space fixed in PLAN.md. "log" draws log(value) uniformly; "log1m" draws
@@ -67,7 +69,7 @@ def draws(n: int = DRAWS, seed: int = DESIGN_SEED) -> tuple[np.ndarray, list[dic
 
 def training_config(recipes: list[dict[str, float]]) -> dict:
     """The --config of stage 1: the default recipe, then the draws, zipped, on every condition, one network each."""
-    points = [{name: hyper.BY_NAME[name].default for name, *_ in SPACE}, *recipes]
+    points = [{name: ROUND_DEFAULTS[name] for name, *_ in SPACE}, *recipes]
     grids = {f"{name}_grid": [p[name] for p in points] for name, *_ in SPACE}
     return {"train": {"zip_grids": True, "seeds": 1, **grids}}
 

@@ -22,6 +22,8 @@ import numpy as np
 
 from reach_jax.config import hyper
 
+ROUND_DEFAULTS = hyper.defaults(8)  # the default recipe while the rounds ran: config version 8, before round 4's pick
+
 SCRIPT = "studies/search/next_stage.py"
 ROUND_ENDS = 3  # exit status when the default outranks every draw (PLAN.md, stage 2's rule)
 
@@ -30,7 +32,7 @@ def design_recipes(design: dict) -> list[dict[str, float]]:
     """The recipes of a design in batch order: stage 1's default then its draws, or a written stage's recipes."""
     if "draws" in design:
         space = [s["name"] for s in design["space"]]
-        return [{n: hyper.BY_NAME[n].default for n in space}, *(d["hypers"] for d in design["draws"])]
+        return [{n: ROUND_DEFAULTS[n] for n in space}, *(d["hypers"] for d in design["draws"])]
     return [r["hypers"] for r in design["recipes"]]
 
 
@@ -53,7 +55,7 @@ def match(label: dict[str, float], recipes: list[dict[str, float]]) -> int:
 
 def is_default(recipe: dict[str, float]) -> bool:
     """Every knob of the recipe at its default."""
-    return all(np.float32(v) == np.float32(hyper.BY_NAME[n].default) for n, v in recipe.items())
+    return all(np.float32(v) == np.float32(ROUND_DEFAULTS[n]) for n, v in recipe.items())
 
 
 def pick(ranking: dict, recipes: list[dict[str, float]], best: int) -> tuple[list[dict], int | None]:
@@ -89,9 +91,7 @@ def main(argv=None) -> int:
     if not args.with_default and default_rank is not None and default_rank < chosen[0]["rank"]:
         print(f"the default ranks {default_rank}, above every draw: the round ends and the default stays")
         return ROUND_ENDS
-    stage = [{"source": "the default", "hypers": {n: hyper.BY_NAME[n].default for n in recipes[0]}}] * bool(
-        args.with_default
-    )
+    stage = [{"source": "the default", "hypers": {n: ROUND_DEFAULTS[n] for n in recipes[0]}}] * bool(args.with_default)
     stage += [{"source": f"rank {c['rank']} of {args.ranking} (D {c['D']:.1f})", "hypers": c["hypers"]} for c in chosen]
     command = f"python {SCRIPT} " + " ".join(sys.argv[1:] if argv is None else argv)
     written = {"command": command, "seeds": args.seeds, "default_rank": default_rank, "recipes": stage}

@@ -20,6 +20,8 @@ from pathlib import Path
 from reach_jax.config import hyper
 from reach_jax.store import run_dir
 
+ROUND_DEFAULTS = hyper.defaults(8)  # the default recipe while the rounds ran: config version 8, before round 4's pick
+
 SCRIPT = "studies/search/objective.py"
 TIE_POINTS = 0.5  # recipes whose D differ by less than this are tied (PLAN.md)
 VERDICT_WORDS = {"holds": "yes", "holds in part": "part", "does not hold": "no"}
@@ -34,7 +36,7 @@ def distance(cells: list[dict]) -> float:
 
 def knobs_changed(hypers: dict) -> list[str]:
     """The hyperparameters of a recipe away from their defaults (values read back as float32)."""
-    return [k for k, v in hypers.items() if not math.isclose(v, hyper.BY_NAME[k].default, rel_tol=1e-6, abs_tol=1e-9)]
+    return [k for k, v in hypers.items() if not math.isclose(v, ROUND_DEFAULTS[k], rel_tol=1e-6, abs_tol=1e-9)]
 
 
 def short_learners(run: Path) -> list[int]:
@@ -110,7 +112,7 @@ def _row(place: int, r: dict) -> str:
     return (
         f"| {place} | `{r['run']}` {r['recipe']} | {r['D']:.1f} | {r['stable']:.0%} | {r['cells_near']}/8 |"
         f" {verdicts} | {100 * nv['success']:.1f} / {100 * nv['out']:.1f} | {ratio} | {damping} |"
-        f" {hyper.describe(r['hypers'])} |"
+        f" {hyper.describe(r['hypers'], ROUND_DEFAULTS)} |"
     )
 
 
