@@ -481,12 +481,13 @@ def test_hidden_pad_is_a_checked_speed_setting_not_a_config_field(argv, message)
     assert "hidden_pad" not in to_dict(Config())["train"]
 
 
-@pytest.mark.parametrize("run", ["table2", "adaptation", "screen2"])
+@pytest.mark.parametrize("run", ["table2_rerun", "adaptation", "screen2"])
 def test_committed_checkpoints_of_earlier_state_layouts_load(run):
-    """Format 2: runs/table2 stored the learner state flat and before protocols, runs/adaptation flat with protocol
-    fields, runs/screen2 grouped, with the trial, its condition, block and curriculum beside the agent. None holds
-    the actor's gain, which came later and reads as 1 (what they trained with), nor the drift gate's failure share
-    and the chunk counters added with it, which read as a fresh learner's (the share 1, the counters 0)."""
+    """Format 2: runs/table2_rerun stored the learner state flat and before protocols, runs/adaptation flat with
+    protocol fields, runs/screen2 grouped, with the trial, its condition, block and curriculum beside the agent.
+    None holds the actor's gain, which came later and reads as 1 (what they trained with), nor the drift gate's
+    failure share and the chunk counters added with it, which read as a fresh learner's (the share 1, the counters
+    0)."""
     root = Path(__file__).resolve().parent.parent / "runs" / run
     loaded = run_dir_io.load(root)
     newest = checkpoint.list_checkpoints(root)[-1]

@@ -52,6 +52,11 @@ def read_config(run_dir: Path) -> Config:
         raise CheckpointError(f"{path}: {exc}") from None
 
 
+def hyper_defaults(run_dir: Path) -> dict[str, float]:
+    """The hyperparameter defaults of the config version that a run's config.json was written in."""
+    return hyper.defaults(json.loads((Path(run_dir) / CONFIG_FILE).read_text())["version"])
+
+
 def create(run_dir: Path, cfg: Config) -> None:
     """Start a run directory: write config.json and drop any metrics of an earlier attempt."""
     run_dir = Path(run_dir)

@@ -24,11 +24,11 @@ import numpy as np
 
 from reach_jax.config import hyper
 from reach_jax.evaluate import figures
+from reach_jax.store import run_dir
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-ROUND_DEFAULTS = hyper.defaults(8)  # recipes are worded against the defaults of the rounds: config version 8
 SCRIPT = "studies/exploration/exploration_map.py"  # how its outputs name the command that made them
 
 FIELD_UNSTABLE = 15.9  # the viscous field's eigenvalue along its unstable axis [N s/m] (docs/model.md §6)
@@ -62,7 +62,7 @@ def recipe_rows(run: Path) -> list[dict]:
             {
                 "run": str(run),
                 "recipe": k,
-                "exploration": hyper.describe(recipe["hypers"], ROUND_DEFAULTS),
+                "exploration": hyper.describe(recipe["hypers"], run_dir.hyper_defaults(run)),
                 "networks": recipe["networks_per_condition"],
                 "damping": damping,
                 "none_viscous_success": _mean(cells.get(("none", "viscous")), "success"),
