@@ -53,8 +53,10 @@ def read_config(run_dir: Path) -> Config:
 
 
 def hyper_defaults(run_dir: Path) -> dict[str, float]:
-    """The hyperparameter defaults of the config version that a run's config.json was written in."""
-    return hyper.defaults(json.loads((Path(run_dir) / CONFIG_FILE).read_text())["version"])
+    """The hyperparameter defaults of the config version that a run's config.json was written in; today's for a
+    folder of evaluation files without one."""
+    path = Path(run_dir) / CONFIG_FILE
+    return hyper.defaults(json.loads(path.read_text())["version"] if path.exists() else None)
 
 
 def create(run_dir: Path, cfg: Config) -> None:
