@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from reach_jax.config import hyper
 from reach_jax.evaluate import compare
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -26,9 +27,16 @@ def test_rows_agree_with_the_recipe_rule_and_the_exploration_map(load_tool):
             assert row["verdicts"] == {int(k): v for k, v in rule["verdicts"].items()}
             assert (row["cells_near"], row["cells"]) == (rule["cells_near"], rule["cells"])
             assert (row["stable"], row["judged"]) == (point["stable"], point["judged"])
-            assert row["words"] == point["exploration"] and row["networks"] == point["networks"]
+            assert row["networks"] == point["networks"]
+            # compare words a recipe against today's defaults, the map against the rounds' (config version 8).
+            hypers = json.loads((run / "eval" / "claims.json").read_text())["recipes"][row["recipe"]]["hypers"]
+            assert row["words"] == hyper.describe(hypers)
+            assert point["exploration"] == hyper.describe(hypers, hyper.defaults(8))
             assert row["none_viscous"]["success"] == point["none_viscous_success"]
             assert {k: row["damping"][k] for k in point["damping"]} == point["damping"]
+    # The old default's held-out run: nothing to say against its own era's defaults, its whole recipe against today's.
+    assert explore.recipe_rows(RUNS[0])[0]["exploration"] == "bound 0.2"
+    assert "learning rate 1; λ 0.999" in compare.recipe_rows(RUNS[0])[0]["words"]
 
 
 def test_the_table_has_one_line_per_recipe_and_json_the_same_rows(tmp_path, capsys):

@@ -19,7 +19,6 @@ from pathlib import Path
 from reach_jax.config import hyper
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line
 from reach_jax.evaluate import report
-from reach_jax.store import run_dir as run_dir_io
 
 CLAIMS = "eval/claims.json"  # each run's decided claims, written by `python -m reach_jax.evaluate`
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # the learning conditions, in the paper's order
@@ -47,7 +46,7 @@ def recipe_rows(run_dir: Path) -> list[dict]:
             {
                 "run": str(run_dir),
                 "recipe": k,
-                "words": hyper.describe(recipe["hypers"], run_dir_io.hyper_defaults(run_dir)),
+                "words": hyper.describe(recipe["hypers"]),
                 "networks": recipe["networks_per_condition"],
                 "chunk": data["chunk"],
                 "verdicts": {c["claim"]: c["verdict"] for c in recipe["claims"]},

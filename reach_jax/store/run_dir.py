@@ -52,13 +52,6 @@ def read_config(run_dir: Path) -> Config:
         raise CheckpointError(f"{path}: {exc}") from None
 
 
-def hyper_defaults(run_dir: Path) -> dict[str, float]:
-    """The hyperparameter defaults of the config version that a run's config.json was written in; today's for a
-    folder of evaluation files without one."""
-    path = Path(run_dir) / CONFIG_FILE
-    return hyper.defaults(json.loads(path.read_text())["version"] if path.exists() else None)
-
-
 def create(run_dir: Path, cfg: Config) -> None:
     """Start a run directory: write config.json and drop any metrics of an earlier attempt."""
     run_dir = Path(run_dir)

@@ -24,11 +24,13 @@ import numpy as np
 
 from reach_jax.config import hyper
 from reach_jax.evaluate import figures
-from reach_jax.store import run_dir
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+# One baseline for every row, the default while the rounds ran (config version 8), so that a recipe of any era
+# names its knobs in the same words.
+ROUND_DEFAULTS = hyper.defaults(8)
 SCRIPT = "studies/exploration/exploration_map.py"  # how its outputs name the command that made them
 
 FIELD_UNSTABLE = 15.9  # the viscous field's eigenvalue along its unstable axis [N s/m] (docs/model.md §6)
@@ -62,7 +64,7 @@ def recipe_rows(run: Path) -> list[dict]:
             {
                 "run": str(run),
                 "recipe": k,
-                "exploration": hyper.describe(recipe["hypers"], run_dir.hyper_defaults(run)),
+                "exploration": hyper.describe(recipe["hypers"], ROUND_DEFAULTS),
                 "networks": recipe["networks_per_condition"],
                 "damping": damping,
                 "none_viscous_success": _mean(cells.get(("none", "viscous")), "success"),
