@@ -271,7 +271,7 @@ def test_the_committed_runs_resume_bare_and_with_their_readmes_command(run, monk
 
 @pytest.mark.slow
 def test_runs_under_two_spellings_are_one_run_bit_for_bit_and_resume_under_each_others(tmp_path):
-    argv = ["--trials", "40", "--seeds", "1", "--conditions", "none", "--chunk-steps", "250", "--quiet"]
+    argv = ["--trials", "40", "--seeds", "1", "--conditions", "none", "--chunk-steps", "300", "--quiet"]
     flags = ["--lr", "0.5", "--sweep", "quiet_every=3"]
     sets = ["--set", "learner.lr=0.5", "--set", "learner.quiet_every=3"]
     a, b = tmp_path / "a", tmp_path / "b"

@@ -281,7 +281,7 @@ class Terminal(io.StringIO):
 def test_a_real_run_draws_the_bar_with_its_estimate(tmp_path):
     stream = Terminal()
     cfg = config.from_partial(
-        {"train": {"trials": 30, "seeds": 1, "conditions": ["none", "random"], "chunk_steps": 200}}
+        {"train": {"trials": 30, "seeds": 1, "conditions": ["none", "random"], "chunk_steps": 300}}
     )
     assert train.run(cfg, tmp_path / "run", stream=stream) == tmp_path / "run"
     lines = stream.getvalue().strip().split("\r")

@@ -332,7 +332,7 @@ def test_a_fresh_batch_has_the_types_that_a_chunk_returns():
     def types(tree):
         return [(a.shape, a.dtype, jax.typeof(a).weak_type) for a in jax.tree.leaves(tree)]
 
-    states, _ = make_chunk(cfg, 20)(group.states, group.plans, group.hypers, jnp.array(10**6))
+    states, _ = make_chunk(cfg, 400)(group.states, group.plans, group.hypers, jnp.array(10**6))
     assert types(group.states) == types(states)
 
 
@@ -529,7 +529,7 @@ def test_chunk_members_shrink_to_the_unfinished_learners():
 def test_a_learner_ends_the_same_whatever_its_batch(tmp_path):
     # Learners finish their trials in different chunks, so the batch shrinks in the tail; each learner must end
     # exactly as it does when trained alone.
-    argv = ["--trials", "40", "--chunk-steps", "250", "--quiet"]
+    argv = ["--trials", "40", "--chunk-steps", "300", "--quiet"]
     assert train_cli.main([*argv, "--seeds", "3", "--conditions", "none,random", "--out", str(tmp_path / "all")]) == 0
     rows = run_dir_io.read_metrics(tmp_path / "all")
     finish = {r["learner"]: r["chunk"] for r in rows if r["trials"] >= 40 and r["chunk_trials"] > 0}

@@ -10,6 +10,7 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 
 import jax
@@ -22,6 +23,8 @@ from reach_jax.store.files import atomic_write_bytes
 CHECKPOINT_DIR = "checkpoints"
 KEEP = 2  # newest checkpoints kept on disk while a run trains
 KEEP_FINISHED = 1  # newest checkpoints kept once it has finished: its final one
+# The leaves an older checkpoint may lack, keyed like `flatten(template)`: made only when one is missing.
+Defaults = Callable[[], dict[str, np.ndarray]]
 
 
 class CheckpointError(OneLineError):
@@ -80,14 +83,12 @@ def list_checkpoints(run_dir: Path) -> list[Path]:
     return sorted(folder.glob("chunk_*.npz"))
 
 
-def load(
-    path: Path, template, defaults: dict[str, np.ndarray] | None = None, aliases=compat.state_aliases
-) -> tuple[object, dict]:
+def load(path: Path, template, defaults: Defaults | None = None, aliases=compat.state_aliases) -> tuple[object, dict]:
     """Read a checkpoint into the structure of `template`; raises CheckpointError naming what is wrong.
 
     A leaf the file lacks is read under the first of `aliases(name, format_version)` that it holds (where older
-    formats kept it), else taken from `defaults`, leaves keyed like `flatten(template)` (fields added to the state
-    since the file was written); any other missing leaf is an error.
+    formats kept it), else taken from `defaults()`, leaves keyed like `flatten(template)` (fields added to the state
+    since the file was written), called once and only then; any other missing leaf is an error.
     """
     path = Path(path)
     try:
@@ -109,15 +110,17 @@ def load(
         readable = " or ".join(map(str, compat.READABLE_CHECKPOINTS))
         raise CheckpointError(f"{path}: field format_version is {version}, expected {readable}")
     leaves, treedef = jax.tree_util.tree_flatten_with_path(template)
-    fallback = defaults or {}
+    fallback = None
     restored = []
     for key_path, leaf in leaves:
         name = jax.tree_util.keystr(key_path)
         old = next((a for a in aliases(name, version) if a in arrays), None) if name not in arrays else None
         if old is not None:
             arrays[name] = arrays[old]
-        if name not in arrays and name in fallback:
-            arrays[name] = fallback[name]
+        if name not in arrays and defaults is not None:
+            fallback = defaults() if fallback is None else fallback
+            if name in fallback:
+                arrays[name] = fallback[name]
         if name not in arrays:
             raise CheckpointError(f"{path}: field {name} missing")
         value = arrays[name]
@@ -130,7 +133,7 @@ def load(
     return jax.tree_util.tree_unflatten(treedef, restored), meta
 
 
-def load_newest(run_dir: Path, template, defaults: dict[str, np.ndarray] | None = None) -> tuple[object, dict, Path]:
+def load_newest(run_dir: Path, template, defaults: Defaults | None = None) -> tuple[object, dict, Path]:
     """`load` of a run's newest checkpoint, and its path; raises CheckpointError when there is none.
 
     A live run may prune the newest one listed before it is read; the listing is then taken again, and the

@@ -9,6 +9,7 @@ Every failure to read is a CheckpointError whose one-line message names the file
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -21,7 +22,7 @@ import numpy as np
 
 from reach_jax.config import Config, compat, first_difference, from_dict, hyper, to_dict, to_json
 from reach_jax.config.schema import DEFAULT_SPEED, SPEED_RESULT_FIELDS, Speed
-from reach_jax.engine import batch
+from reach_jax.engine import batch, learner_state
 from reach_jax.env import trial_log
 from reach_jax.store import checkpoint, files, metrics_log
 from reach_jax.store.checkpoint import CheckpointError
@@ -193,11 +194,14 @@ def load_batch(
     `speed` (the speed to continue with; None: not checked) has another setting that changes results.
     """
     hypers = batch.hyper_columns(cfg)
-    template = {"states": jax.eval_shape(lambda: batch.fresh_states(cfg)), "hypers": hypers}
+    template = {"states": state_shapes(cfg, jax.config.jax_enable_x64), "hypers": hypers}
+
     # Hyperparameters added since the checkpoint was written take their values from the config, and state fields
     # added since (the condition and block a trial runs in, which never change without a protocol, and the
     # others of compat.ADDED_STATE_FIELDS) the values of a fresh learner.
-    defaults = {**checkpoint.flatten({"hypers": hypers}), **added_state_defaults(cfg)}
+    def defaults():
+        return {**checkpoint.flatten({"hypers": hypers}), **added_state_defaults(cfg)}
+
     if path is None:
         tree, meta, path = checkpoint.load_newest(run_dir, template, defaults)
     else:
@@ -214,6 +218,14 @@ def load_batch(
         check_speed(path, meta, speed)
     states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
     return batch.Batch(states, batch.conditions(cfg), hypers, batch.plans(cfg)), int(meta["chunk"])
+
+
+@functools.lru_cache(maxsize=32)
+def state_shapes(cfg: Config, x64: bool) -> learner_state.LearnerState:
+    """The shape and dtype of every leaf of cfg's fresh learner states, traced, never built; kept per config and
+    JAX's 64-bit mode (`x64`, which sets the dtypes), since tracing takes about 40 ms and readers such as
+    `--resume`'s validation ask again."""
+    return jax.eval_shape(lambda: batch.fresh_states(cfg))
 
 
 def added_state_defaults(cfg: Config) -> dict[str, np.ndarray]:
