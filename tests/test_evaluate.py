@@ -305,7 +305,7 @@ def test_minimum_jerk_yardstick_is_straight_single_peaked_and_reaches_every_targ
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("run") / "tiny"
-    cfg = dataclasses.replace(CFG, train=dataclasses.replace(TrainConfig(), trials=20, seeds=1, chunk_steps=200))
+    cfg = dataclasses.replace(CFG, train=dataclasses.replace(TrainConfig(), trials=20, seeds=1, chunk_steps=300))
     train.run(cfg, run_dir, progress=False)
     return run_dir
 
