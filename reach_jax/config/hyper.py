@@ -272,6 +272,13 @@ def describe(values: dict[str, float], baseline: dict[str, float] | None = None)
     return "; ".join(words)
 
 
+def changed(values: dict[str, float], baseline: dict[str, float] | None = None) -> list[str]:
+    """The names in `values` set away from the baseline (today's defaults when None), in their order, compared at
+    float32 precision as a batch stores them."""
+    baseline = defaults() if baseline is None else baseline
+    return [name for name in values if _set(values, BY_NAME[name], baseline)]
+
+
 def _set(values: dict[str, float], h: Hyperparameter, baseline: dict[str, float]) -> bool:
     """Whether `values` sets h away from the baseline (at float32 precision, as a batch stores it)."""
     return h.name in values and np.float32(values[h.name]) != np.float32(baseline[h.name])

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 
 from reach_jax.config import hyper
@@ -33,15 +32,6 @@ CONDITIONS = ("none", "viscous", "random", "random_nopast")
 TITLE = "The second round's choice of recipe"  # the heading of OUT.md unless --title names the round
 
 
-def forms_changed(hypers: dict) -> list[str]:
-    """The hyperparameters of a recipe that differ from their defaults (float32 values read back from JSON)."""
-    return [
-        name
-        for name, value in hypers.items()
-        if not math.isclose(value, ROUND_DEFAULTS[name], rel_tol=1e-6, abs_tol=1e-9)
-    ]
-
-
 def recipe_records(run: Path) -> list[dict]:
     """One record per recipe of a run: what the rule orders by, and whether the run is full length."""
     data = json.loads((run / "eval" / "claims.json").read_text())
@@ -54,7 +44,7 @@ def recipe_records(run: Path) -> list[dict]:
             {
                 "run": str(run),
                 "recipe": k,
-                "forms": forms_changed(recipe["hypers"]),
+                "forms": hyper.changed(recipe["hypers"], ROUND_DEFAULTS),
                 "full_length": data["trials_per_network"] >= FULL_TRIALS
                 and recipe["networks_per_condition"] >= MIN_NETWORKS
                 and set(CONDITIONS) <= learnings,

@@ -53,17 +53,12 @@ def match(label: dict[str, float], recipes: list[dict[str, float]]) -> int:
     return same[0]
 
 
-def is_default(recipe: dict[str, float]) -> bool:
-    """Every knob of the recipe at its default."""
-    return all(np.float32(v) == np.float32(ROUND_DEFAULTS[n]) for n, v in recipe.items())
-
-
 def pick(ranking: dict, recipes: list[dict[str, float]], best: int) -> tuple[list[dict], int | None]:
     """The best `best` draws (the default left out), each {"rank", "D", "hypers"}, and the default's rank or None."""
     chosen, default_rank = [], None
     for place, rec in enumerate(ranking["ranked"], start=1):
         recipe = recipes[match(rec["hypers"], recipes)]
-        if is_default(recipe):
+        if not hyper.changed(recipe, ROUND_DEFAULTS):
             default_rank = place
         elif len(chosen) < best:
             chosen.append({"rank": place, "D": rec["D"], "hypers": recipe})

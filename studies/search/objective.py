@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 from pathlib import Path
 
 from reach_jax.config import hyper
@@ -32,11 +31,6 @@ def distance(cells: list[dict]) -> float:
     judged = [c for c in cells if c["paper"] is not None]
     terms = [abs(c[k]["mean"] - c["paper"][k]) * 100 for c in judged for k in ("success", "out")]
     return sum(terms) / len(judged)
-
-
-def knobs_changed(hypers: dict) -> list[str]:
-    """The hyperparameters of a recipe away from their defaults (values read back as float32)."""
-    return [k for k, v in hypers.items() if not math.isclose(v, ROUND_DEFAULTS[k], rel_tol=1e-6, abs_tol=1e-9)]
 
 
 def short_learners(run: Path) -> list[int]:
@@ -78,7 +72,7 @@ def records(run: Path) -> list[dict]:
                 "run": str(run),
                 "recipe": k,
                 "hypers": recipe["hypers"],
-                "knobs": knobs_changed(recipe["hypers"]),
+                "knobs": hyper.changed(recipe["hypers"], ROUND_DEFAULTS),
                 "networks": recipe["networks_per_condition"],
                 "D": distance(recipe["cells"]),
                 "stable": sum(p["stable"] for p in learners) / len(learners),
