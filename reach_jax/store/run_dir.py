@@ -194,7 +194,7 @@ def load_batch(
     `speed` (the speed to continue with; None: not checked) has another setting that changes results.
     """
     hypers = batch.hyper_columns(cfg)
-    template = {"states": state_shapes(cfg, jax.config.jax_enable_x64), "hypers": hypers}
+    template = {"states": _state_shapes(cfg, jax.config.jax_enable_x64), "hypers": hypers}
 
     # Hyperparameters added since the checkpoint was written take their values from the config, and state fields
     # added since (the condition and block a trial runs in, which never change without a protocol, and the
@@ -221,7 +221,7 @@ def load_batch(
 
 
 @functools.lru_cache(maxsize=32)
-def state_shapes(cfg: Config, x64: bool) -> learner_state.LearnerState:
+def _state_shapes(cfg: Config, x64: bool) -> learner_state.LearnerState:
     """The shape and dtype of every leaf of cfg's fresh learner states, traced, never built; kept per config and
     JAX's 64-bit mode (`x64`, which sets the dtypes), since tracing takes about 40 ms and readers such as
     `--resume`'s validation ask again."""
