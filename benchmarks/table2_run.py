@@ -5,7 +5,9 @@
 Reads RUN's metrics.jsonl: the wall time, and the time of one batch step in each chunk (the chunk's wall time
 over its steps [us]), grouped by the batch the chunk ran (`progress.pow2_batch` of the learners unfinished at
 its start). With --against it compares RUN's newest checkpoint leaf by leaf and its metrics row by row (wall
-time aside) with the committed run. Writes benchmarks/results/table2-run-<UTC time>.json unless --json names one.
+time aside) with the committed run: the leaves that its checkpoint stores (an older layout lacks the fields added
+since), and the metrics on the fields both rows hold, at float32. Writes
+benchmarks/results/table2-run-<UTC time>.json unless --json names one.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from reach_jax.config import compat
 from reach_jax.store import checkpoint
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train.progress import pow2_batch
@@ -26,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import throughput  # noqa: E402  (the sibling benchmark's results folder and code version)
 
-IGNORED = ("wall_s", "block")  # metrics fields that may differ between equal runs: time, and a column added later
+IGNORED = ("wall_s",)  # metrics fields that may differ between equal runs: time
 
 
 def parse(argv=None) -> argparse.Namespace:
@@ -64,6 +67,24 @@ def step_times(rows: list[dict], budget: int) -> dict[str, dict]:
     }
 
 
+def stored_leaves(path: Path, leaves: dict) -> list[str]:
+    """The names among `leaves` (today's) that the checkpoint at `path` stores, under today's name or an older one."""
+    with np.load(path) as data:
+        names = set(data.files)
+        version = json.loads(data["__meta__"].tobytes().decode())["format_version"]
+    return [k for k in leaves if k in names or any(a in names for a in compat.state_aliases(k, version))]
+
+
+def same_row(mine: dict, theirs: dict) -> bool:
+    """Whether two metrics rows agree on every field both hold but IGNORED, floats at float32 (older writers spelled
+    a float32 as its float64 expansion, and lack the columns added since)."""
+
+    def stored(v):
+        return np.float32(v) if isinstance(v, float) else v
+
+    return all(stored(mine[k]) == stored(theirs[k]) for k in mine.keys() & theirs.keys() if k not in IGNORED)
+
+
 def main(argv=None) -> int:
     """Measure RUN, compare it if asked, write the JSON."""
     args = parse(argv)
@@ -72,19 +93,20 @@ def main(argv=None) -> int:
     result = {"run": str(args.run), "wall_s": max(r["wall_s"] for r in rows), "chunks": max(r["chunk"] for r in rows)}
     result["batch_step_us"] = step_times(rows, cfg.train.trials)
     if args.against:
-        # Both read through load_batch, which maps the leaf names of earlier checkpoint layouts onto today's.
+        # Both read through load_batch, which maps the leaf names of earlier checkpoint layouts onto today's and
+        # fills the fields added since with a fresh learner's values: only the leaves the older file holds compare.
         loaded = [run_dir_io.load_batch(d, run_dir_io.read_config(d)) for d in (args.run, args.against)]
         (mine, mine_chunk), (theirs, theirs_chunk) = loaded
-        a, b = checkpoint.flatten(mine.states), checkpoint.flatten(theirs.states)
-        differ = sorted(k for k in a.keys() | b.keys() if k not in a or k not in b or not np.array_equal(a[k], b[k]))
+        a, b = checkpoint.flatten({"states": mine.states}), checkpoint.flatten({"states": theirs.states})
+        held = stored_leaves(checkpoint.list_checkpoints(args.against)[-1], b)
+        differ = sorted(k for k in held if k not in a or not np.array_equal(a[k], b[k]))
         old = run_dir_io.read_metrics(args.against)
-        strip = [{k: v for k, v in r.items() if k not in IGNORED} for r in rows]
-        kept = [{k: v for k, v in r.items() if k not in IGNORED} for r in old]
-        unequal = sum(x != y for x, y in zip(strip, kept, strict=False)) + abs(len(strip) - len(kept))
+        unequal = sum(not same_row(x, y) for x, y in zip(rows, old, strict=False)) + abs(len(rows) - len(old))
         result["against"] = {
             "run": str(args.against),
             "checkpoint_chunks": [mine_chunk, theirs_chunk],
-            "checkpoint_leaves": len(a),
+            "checkpoint_leaves": len(held),
+            "checkpoint_leaves_filled": len(b) - len(held),
             "checkpoint_leaves_differing": differ,
             "metrics_rows": [len(rows), len(old)],
             "metrics_rows_differing": unequal,
