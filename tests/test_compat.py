@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import pytest
 
 from reach_jax.config import (
     CONFIG_VERSION,
     Config,
     LearnerConfig,
+    checked_config,
     compat,
     from_dict,
     from_partial,
     hyper,
+    read_config_file,
     to_dict,
     with_defaults,
 )
@@ -77,30 +82,44 @@ def test_version_1_fields_added_since_read_as_what_those_runs_trained_with():
     del stored["learner"]["noise_corr"]  # came in neutral
     cfg = from_dict(stored)
     assert cfg.task.drift_neutral_when_full is False
-    assert cfg.learner.noise_corr == 0.0 != Config().learner.noise_corr  # white, as before version 9's default
+    assert cfg.learner.noise_corr == 0.0  # white, as every default but version 9's
     stored["task"]["drift_neutral_when_full"] = True
-    assert from_dict(stored) == Config(learner=LearnerConfig(noise_corr=0.0))
+    assert from_dict(stored) == Config()
 
 
 def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_before():
-    """Version 9 made round 4's pick the default; a version-1 config without those fields trained the old recipe."""
-    old = compat.CHANGED_DEFAULTS[9]
-    stored = {**to_dict(Config()), "version": 1}
+    """Version 9 made round 4's pick the default and version 10 put the old recipe back; a version-1 config without
+    those fields trained the old recipe, today's default again."""
+    old, pick = compat.CHANGED_DEFAULTS[9], compat.CHANGED_DEFAULTS[10]
+    assert old.keys() == pick.keys() and all(old[s].keys() == pick[s].keys() for s in old)
+    stored = {**to_dict(Config(learner=LearnerConfig(**pick["learner"]))), "version": 1}
     for section, fields in old.items():
         for name in fields:
             del stored[section][name]
     cfg = from_dict(stored)
     for section, fields in old.items():
         for name, value in fields.items():
-            assert getattr(getattr(cfg, section), name) == value != getattr(getattr(Config(), section), name), name
-    as_of = {v: {n: getattr(c, n) for n in hyper.NAMES} for v, c in ((8, cfg.learner), (9, Config().learner))}
-    assert hyper.defaults(8) == {**hyper.defaults(), **old["learner"]} == as_of[8]
-    assert hyper.defaults(9) == hyper.defaults() == as_of[9]
-    stored = {**to_dict(Config()), "version": 8}  # complete: its stored values stand, whatever the defaults
-    assert from_dict(stored) == Config()
+            assert getattr(getattr(cfg, section), name) == value == getattr(getattr(Config(), section), name), name
+            assert value != pick[section][name], name
+    assert hyper.defaults(8) == hyper.defaults() == {**hyper.defaults(), **old["learner"]}
+    assert hyper.defaults(9) == {**hyper.defaults(), **pick["learner"]} != hyper.defaults()
+    assert hyper.defaults(10) == hyper.defaults()
+    stored = {**to_dict(Config(learner=LearnerConfig(**pick["learner"]))), "version": 9}  # complete: its values stand
+    assert from_dict(stored).learner == LearnerConfig(**pick["learner"])
     del stored["learner"]["lr"]
     with pytest.raises(ValueError, match="^learner.lr: missing"):
         from_dict(stored)
+
+
+def test_the_named_recipe_of_round_4_is_version_9s_default_one_config_away():
+    """recipes/round4_pick.json spells config version 9's default recipe, the values `CHANGED_DEFAULTS[10]` holds."""
+    data = read_config_file(Path(__file__).resolve().parents[1] / "recipes" / "round4_pick.json")
+    assert "comment" not in data  # read and dropped
+    cfg = checked_config(data)
+    pick = compat.CHANGED_DEFAULTS[10]
+    for section, fields in pick.items():
+        assert {n: getattr(getattr(cfg, section), n) for n in fields} == fields
+    assert dataclasses.replace(cfg, learner=Config().learner, task=Config().task) == Config()
 
 
 @pytest.mark.parametrize(
@@ -115,7 +134,7 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8 or 9, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9 or 10, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
 
 

@@ -413,6 +413,8 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
 def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
     a_file = tmp_path / "file"
     a_file.write_text("x")
+    commented = tmp_path / "comment.json"
+    commented.write_text('{"comment": 3, "learner": {"lr": 0.5}}')
     cases = [
         ["--trials", "0"],
         ["--trials", "-3"],
@@ -448,6 +450,7 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         ["--set", "learner.noise=-1"],
         ["--config", str(a_file)],
         ["--config", str(tmp_path / "missing.json")],
+        ["--config", str(commented)],
     ]
     for argv in cases:
         out_dir = ["--out", str(tmp_path / "run")] if "--out" not in argv and "--resume" not in argv else []
@@ -456,7 +459,7 @@ def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):
         assert status == errors.EXIT_USAGE, argv
         assert err.count("\n") == 1 and err.startswith("python -m reach_jax.train: error:"), (argv, err)
         assert "Traceback" not in err
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["comment.json", "file"]
 
 
 def test_config_file_set_and_flags_build_the_config_in_that_order_through_from_dict(tmp_path):
@@ -471,8 +474,8 @@ def test_config_file_set_and_flags_build_the_config_in_that_order_through_from_d
         ["--config", str(path), "--set", "train.seeds=4", "--seeds", "5", "--out", str(tmp_path / "r")]
     ).cfg
     assert cfg.train.seeds == 5
-    # A hand-written file may hold a few fields and no version; the rest are the defaults.
-    path.write_text(json.dumps({"learner": {"lr": 0.5}}))
+    # A hand-written file may hold a few fields, no version and a comment for its reader; the rest are the defaults.
+    path.write_text(json.dumps({"comment": ["why", "this"], "learner": {"lr": 0.5}}))
     cfg = train_cli.parse(["--config", str(path), "--out", str(tmp_path / "r")]).cfg
     assert cfg == dataclasses.replace(Config(), learner=dataclasses.replace(LearnerConfig(), lr=0.5))
     # --set takes an int for a float field, as from_dict does, and checks the result the same way.
@@ -511,10 +514,11 @@ def test_metrics_rows_read_the_batchs_hyperparameters_spelled_as_the_config():
     group = batch.init_batch(cfg)
     hypers = group.hypers._replace(noise=jnp.asarray([0.213, 0.35], jnp.float32))
     rows = train.metrics_rows(jax.device_get(group.states), hypers, batch.learner_table(cfg.train), 1, 0.0, cfg)
-    assert [r["noise"] for r in rows] == [0.213, 0.35]  # the batch's, not the config's 0.213 twice
+    assert [r["noise"] for r in rows] == [0.213, 0.35]  # the batch's, not the config's 0.2 twice
     assert rows[1]["exploration"] == 0.35  # not annealed yet: the batch's bound, at its float32 precision
     first = json.dumps({k: rows[0][k] for k in hyper.NAMES})
-    assert first == json.dumps(batch.learner_hypers(cfg)[0])  # 0.213 and 300000, not 0.21299999952 or 300000.0
+    spelled = {**batch.learner_hypers(cfg)[0], "noise": 0.213}
+    assert first == json.dumps(spelled)  # 0.213 and 300000, not 0.21299999952 or 300000.0
 
 
 def test_chunk_members_shrink_to_the_unfinished_learners():

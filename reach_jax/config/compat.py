@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -30,7 +30,8 @@ ADDED_CONFIG_FIELDS = {
 
 # Defaults changed with a config version, at their values before it: a version-1 config, which left out the
 # fields added during its life, trained with these where it lacks them. Version 9 made round 4's held-out pick the
-# default recipe (model §11).
+# default recipe; version 10 put the recipe of version 8 back, since the pick collapsed learners in both runs of the
+# main command (model §11). The pick is `recipes/round4_pick.json`.
 CHANGED_DEFAULTS = {
     9: {
         "learner": {
@@ -45,6 +46,20 @@ CHANGED_DEFAULTS = {
             "drift_gate": 0.0,
         },
         "task": {"max_trial_time": 10.0},
+    },
+    10: {
+        "learner": {
+            "lr": 1.6,
+            "noise": 0.213,
+            "lam": 0.99728,
+            "noise_final_ratio": 0.758,
+            "noise_anneal_delay": 298_000,
+            "noise_value_ratio": 0.716,
+            "noise_corr": 0.311,
+            "actor_signal_gain": 0.703,
+            "drift_gate": 0.401,
+        },
+        "task": {"max_trial_time": 4.0},
     },
 }
 

@@ -27,13 +27,17 @@ PAPER_HYPER = ("lr", "noise", "lam")  # the hyperparameters with a flag of their
 
 
 def read_config_file(path: Path) -> dict:
-    """The JSON object of a --config file; raises UsageError naming the file."""
+    """The JSON object of a --config file, without its top-level "comment" (a string or a list of lines, for the
+    reader: JSON has no comments); raises UsageError naming the file."""
     try:
         data = json.loads(Path(path).read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise UsageError(f"--config {path}: unreadable ({exc})") from None
     if not isinstance(data, dict):
         raise UsageError(f"--config {path}: expected a JSON object")
+    comment = data.pop("comment", "")
+    if not (isinstance(comment, str) or (isinstance(comment, list) and all(isinstance(c, str) for c in comment))):
+        raise UsageError(f"--config {path}: comment: expected a string or a list of strings")
     return data
 
 
