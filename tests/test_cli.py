@@ -271,12 +271,17 @@ def test_the_committed_runs_resume_bare_and_with_their_readmes_command(run, monk
 
 
 @pytest.mark.slow
-def test_runs_under_two_spellings_are_one_run_bit_for_bit_and_resume_under_each_others(tmp_path):
+def test_runs_under_two_spellings_are_one_run_bit_for_bit_and_resume_under_each_others(tmp_path, capsys):
     argv = ["--trials", "40", "--seeds", "1", "--conditions", "none", "--chunk-steps", "300", "--quiet"]
     flags = ["--lr", "0.5", "--sweep", "quiet_every=3"]
     sets = ["--set", "learner.lr=0.5", "--set", "learner.quiet_every=3"]
     a, b = tmp_path / "a", tmp_path / "b"
     assert train_cli.main([*argv, *flags, "--out", str(a)]) == 0
+    # The summary names the learners in trouble (tests/test_collapse.py), even with --quiet.
+    assert capsys.readouterr().err.splitlines()[-2:] == [
+        "python -m reach_jax.train: no learner collapsed or fell back",
+        f"run written to {a}",
+    ]
     assert train_cli.main([*argv, *sets, "--out", str(b)]) == 0
     assert (a / run_dir_io.CONFIG_FILE).read_bytes() == (b / run_dir_io.CONFIG_FILE).read_bytes()
     (name, got), (want_name, want) = final_arrays(b), final_arrays(a)

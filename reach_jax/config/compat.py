@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -26,6 +26,7 @@ ADDED_CONFIG_FIELDS = {
     },
     7: {"train": {"zip_grids": False}},
     8: {"claims": {"informative_networks": 4}},
+    11: {"claims": {"collapse_success": 0.5, "collapse_trials": 10_000}},
 }
 
 # Defaults changed with a config version, at their values before it: a version-1 config, which left out the

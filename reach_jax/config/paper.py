@@ -42,6 +42,9 @@ class ClaimsConfig:
     curriculum_tail: float = 0.2  # stability is judged over the last 20% of each learner's trials
     curriculum_min_fraction: float = 0.9  # a chunk below 90% of the whole field counts as a setback
     curriculum_max_setbacks: float = 0.01  # a learner is stable with at most 1% of its tail chunks set back
+    collapse_success: float = 0.5  # a network collapsed: success below this in its home test (docs/claims.md)
+    collapse_trials: int = 10_000  # in training: collapsed while success over its last this many trials (whole
+    # chunks) is below collapse_success, after the curriculum first reached the whole field (our choice)
 
 
 def paper_cell(learning: str, test: str) -> dict:

@@ -22,7 +22,7 @@ from reach_jax.config.tables import (
     ProtocolConfig,
 )
 
-CONFIG_VERSION = 10  # a stored config holds every field; 3-8 each added fields, 9-10 changed defaults (`compat`)
+CONFIG_VERSION = 11  # a stored config holds every field; 3-8 and 11 added fields, 9-10 changed defaults (`compat`)
 
 
 @dataclass(frozen=True)

@@ -57,8 +57,17 @@ def _large_enough(mean: float | None, paper: float, c: ClaimsConfig, log: bool =
     return ours / theirs >= c.size_fraction if theirs else False
 
 
-def _claim(number: int, claim: str, test: str, numbers: dict, verdict: str, why: str) -> dict:
-    return {"claim": number, "statement": claim, "test": test, "numbers": numbers, "verdict": verdict, "why": why}
+def _claim(number: int, claim: str, test: str, numbers: dict, verdict: str, why: str, learnings: tuple) -> dict:
+    """A claim's record; `learnings` are the learning conditions whose networks it reads."""
+    return {
+        "claim": number,
+        "statement": claim,
+        "test": test,
+        "numbers": numbers,
+        "verdict": verdict,
+        "why": why,
+        "learnings": list(learnings),
+    }
 
 
 def claim_matched(cells: Cells, c: ClaimsConfig) -> dict:
@@ -79,6 +88,7 @@ def claim_matched(cells: Cells, c: ClaimsConfig) -> dict:
         numbers,
         verdict,
         f"{sum(ok)} of 2 intervals above the bound",
+        ("none", "viscous"),
     )
 
 
@@ -114,6 +124,7 @@ def claim_unexpected_field(cells: Cells, after: dict, c: ClaimsConfig) -> dict:
         numbers,
         verdict,
         why,
+        ("none",),
     )
 
 
@@ -153,6 +164,7 @@ def claim_aftereffect(cells: Cells, after: dict, c: ClaimsConfig) -> dict:
         numbers,
         verdict,
         why,
+        ("viscous",),
     )
 
 
@@ -181,6 +193,7 @@ def claim_random_robust(cells: Cells, c: ClaimsConfig) -> dict:
         numbers,
         verdict,
         "; ".join(f"{label}: {'yes' if flag else 'no'}" for label, flag in zip(labels, ok, strict=True)),
+        ("none", "random"),
     )
 
 
@@ -210,6 +223,7 @@ def claim_past_inputs(cells: Cells, c: ClaimsConfig) -> dict:
         numbers,
         verdict,
         why,
+        ("random", "random_nopast"),
     )
 
 

@@ -3,10 +3,11 @@
     python -m reach_jax.evaluate.compare RUN_DIR [RUN_DIR ...] [--json FILE]
 
 A row holds the recipe in words (`config.hyper.describe`), its networks per condition, the verdict of each claim,
-the Table-2 cells near the paper's, the learners that stayed at the whole field late in training, the unexpected
-field's cell (no-field networks tested in the viscous field) and the learned hand damping along the field's
-unstable axis without the field, per learning condition. Nothing is recomputed: the rows are the run's own
-evaluation, so runs evaluated by any version of the code compare as they were decided.
+the Table-2 cells near the paper's, the learners that stayed at the whole field late in training, the networks that
+collapsed (`collapse`), the unexpected field's cell (no-field networks tested in the viscous field) and the learned
+hand damping along the field's unstable axis without the field, per learning condition. Nothing is recomputed: the
+rows are the run's own evaluation, so runs evaluated by any version of the code compare as they were decided; the
+collapsed networks of an evaluation made before they were named come from its `eval/table2.json`.
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ import json
 import sys
 from pathlib import Path
 
-from reach_jax.config import hyper
+from reach_jax.config import Config, hyper
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line
-from reach_jax.evaluate import report
+from reach_jax.evaluate import collapse, report
+from reach_jax.store import run_dir as run_dir_io
 
 CLAIMS = "eval/claims.json"  # each run's decided claims, written by `python -m reach_jax.evaluate`
 CONDITIONS = ("none", "viscous", "random", "random_nopast")  # the learning conditions, in the paper's order
@@ -30,6 +32,7 @@ def recipe_rows(run_dir: Path) -> list[dict]:
 
     A record holds the run, the recipe's index and words, `networks`, `chunk`, `verdicts` (claim number ->
     verdict), `cells_near` of the `cells` the paper has, `stable` of `judged` learners (None: none judged yet),
+    `collapsed` (the collapsed networks' names, `collapse.names`; "" for none, None where unknown),
     `none_viscous` (mean success and out per network, fractions) and `damping` (learning condition -> mean damping
     along the field's unstable axis [N s/m]).
 
@@ -38,6 +41,7 @@ def recipe_rows(run_dir: Path) -> list[dict]:
     """
     data = json.loads((Path(run_dir) / CLAIMS).read_text())
     rows = []
+    collapsed = collapsed_of(Path(run_dir), data)
     for k, recipe in enumerate(data["recipes"]):
         judged = [p for p in recipe["curriculum"]["learners"] if p["tail_chunks"]]
         judged_cells, near = report.paper_cells(recipe["cells"])
@@ -54,6 +58,7 @@ def recipe_rows(run_dir: Path) -> list[dict]:
                 "cells": len(judged_cells),
                 "stable": sum(p["stable"] for p in judged) if judged else None,
                 "judged": len(judged),
+                "collapsed": None if collapsed is None else collapse.names([n for n in collapsed if n["recipe"] == k]),
                 "none_viscous": None
                 if field is None
                 else {"success": field["success"]["mean"], "out": field["out"]["mean"]},
@@ -65,27 +70,43 @@ def recipe_rows(run_dir: Path) -> list[dict]:
     return rows
 
 
+def collapsed_of(run_dir: Path, claims: dict) -> list[dict] | None:
+    """Every recipe's collapsed networks: as the evaluation named them in claims.json, else from its table2.json
+    under the run's criteria (the defaults' for a folder without config.json); None without either."""
+    if all("collapsed" in r for r in claims["recipes"]):
+        return [n for r in claims["recipes"] for n in r["collapsed"]]
+    if not (run_dir / "eval" / "table2.json").is_file():
+        return None
+    cfg = run_dir_io.read_config(run_dir) if run_dir_io.holds_run(run_dir) else Config()
+    table = json.loads((run_dir / "eval" / "table2.json").read_text())
+    tests, rate = cfg.eval.test_conditions, cfg.claims.collapse_success
+    return collapse.collapsed_networks(table["per_network"], table["pairs_per_network"], tests, rate)
+
+
 def markdown(rows: list[dict]) -> str:
     """The records of `recipe_rows` as one Markdown table, with a line that says how to read it."""
     lines = [
         "Claims: holds / part (holds in part) / no. Near: Table-2 cells within the target. Stable: of the learners "
-        "in their last 20% of trials, those that stayed at the whole field. none → viscous: mean success / out per "
+        "in their last 20% of trials, those that stayed at the whole field. Collapsed: networks below 50% success in "
+        "their own condition's test (the null field's for random forces). none → viscous: mean success / out per "
         "network (paper 55% / 45%). Damping: mean learned hand damping along the field's unstable axis, no field, "
         "N s/m, per learning condition (none / viscous / random / random_nopast; the field's eigenvalue there is "
         "+15.9).",
         "",
-        "| run | recipe | exploration | seeds | chunk | 1 | 2 | 3 | 4 | 5 | near | stable | none → viscous | damping |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| run | recipe | exploration | seeds | chunk | 1 | 2 | 3 | 4 | 5 | near | stable | collapsed | none → viscous "
+        "| damping |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         verdicts = " | ".join(SHORT[r["verdicts"][k]] if k in r["verdicts"] else "–" for k in range(1, 6))
         stable = "not yet judged" if r["stable"] is None else f"{r['stable']}/{r['judged']}"
         field = r["none_viscous"]
         field = "–" if field is None else f"{100 * field['success']:.0f}% / {100 * field['out']:.0f}%"
+        collapsed = "–" if r["collapsed"] is None else r["collapsed"] or "none"
         damping = " / ".join(f"{r['damping'][c]:.0f}" for c in CONDITIONS if c in r["damping"])
         lines.append(
             f"| `{r['run']}` | {r['recipe']} | {r['words']} | {r['networks']} | {r['chunk']} | {verdicts} | "
-            f"{r['cells_near']}/{r['cells']} | {stable} | {field} | {damping} |"
+            f"{r['cells_near']}/{r['cells']} | {stable} | {collapsed} | {field} | {damping} |"
         )
     return "\n".join(lines) + "\n"
 

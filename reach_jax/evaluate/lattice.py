@@ -29,7 +29,7 @@ from reach_jax.config import Config, hyper
 from reach_jax.config.paper import PAPER_NETWORKS, PAPER_TABLE2
 from reach_jax.env import task
 from reach_jax.env.environment import OUTCOME_NAMES, SUCCESS
-from reach_jax.evaluate.report import interval_text
+from reach_jax.evaluate.report import collapsed_words, interval_text
 from reach_jax.physics import fields, sensor
 
 
@@ -148,6 +148,21 @@ def _recipe_name(hypers: dict) -> str:
     return ", ".join(f"{k} {v:g}" for k, v in hypers.items())
 
 
+def _table2_row(cell: dict, first: dict | None, few: int) -> str:
+    """One Table-2 cell as a Markdown row: our intervals, our networks 0-1 summed (`first`), the paper's, near it."""
+    ours01 = _cell(first["success"], first["out"], first["fail"], first["mean_time_s"]) if first else "–"
+    key = (cell["learning"], cell["test"])
+    paper = _cell(*PAPER_TABLE2[key]) if key in PAPER_TABLE2 else "–"
+    near = "–"
+    if cell["near_paper"]:
+        near = " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
+    return (
+        f"| {cell['learning']} → {cell['test']} | {interval_text(cell['success'], few, 100.0)} | "
+        f"{interval_text(cell['out'], few, 100.0)} | {interval_text(cell['mean_time_s'], few, 1.0, 2)} | "
+        f"{ours01} | {paper} | {near} |"
+    )
+
+
 def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
     """Table 2 in Markdown per recipe: mean per network with its interval, our networks 0-1 summed, the paper's.
 
@@ -184,19 +199,7 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
             "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper |",
             "|---|---|---|---|---|---|---|",
         ]
-        for cell in recipe["cells"]:
-            first = sums.get((cell["learning"], cell["test"], k))
-            ours01 = _cell(first["success"], first["out"], first["fail"], first["mean_time_s"]) if first else "–"
-            key = (cell["learning"], cell["test"])
-            paper = _cell(*PAPER_TABLE2[key]) if key in PAPER_TABLE2 else "–"
-            near = (
-                " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
-                if cell["near_paper"]
-                else "–"
-            )
-            lines.append(
-                f"| {cell['learning']} → {cell['test']} | {interval_text(cell['success'], few, 100.0)} | "
-                f"{interval_text(cell['out'], few, 100.0)} | {interval_text(cell['mean_time_s'], few, 1.0, 2)} | "
-                f"{ours01} | {paper} | {near} |"
-            )
+        lines += [_table2_row(cell, sums.get((cell["learning"], cell["test"], k)), few) for cell in recipe["cells"]]
+        if "collapsed" in recipe:
+            lines += ["", collapsed_words(recipe)]
     return "\n".join(lines) + "\n"

@@ -5,6 +5,8 @@ Units as in `claims`: success and out in percentage points, times [s], damping [
 
 from __future__ import annotations
 
+from reach_jax.evaluate import collapse
+
 
 def paper_cells(cells: list[dict]) -> tuple[list[dict], list[dict]]:
     """A recipe's Table-2 cells (its `claims.json` entries) that the paper has, and of those the ones near it.
@@ -70,7 +72,6 @@ def claims_markdown(result: dict, source: str) -> str:
     lines = [f"# The paper's claims — {source}", ""]
     for k, recipe in enumerate(result["recipes"]):
         name = ", ".join(f"{key} {v:g}" for key, v in recipe["hypers"].items())
-        few = recipe.get("informative_networks", 0)
         lines += [
             f"## Recipe {k}: {name} ({recipe['networks_per_condition']} networks per condition)",
             "",
@@ -79,45 +80,84 @@ def claims_markdown(result: dict, source: str) -> str:
             "",
             "| claim | test | ours | paper | verdict |",
             "|---|---|---|---|---|",
+            *(_claim_row(c, recipe.get("informative_networks", 0)) for c in recipe["claims"]),
+            "",
+            *_checks(recipe),
+            "",
+            *_damping_table(recipe),
+            "",
         ]
-        for c in recipe["claims"]:
-            ours, paper = [], []
-            for key, value in c["numbers"].items():
-                inner = value.get("success", value) if isinstance(value, dict) and "success" in value else value
-                label = f"{key}_success" if isinstance(value, dict) and "success" in value else key
-                ours.append(f"{key.replace('_', ' ')}: {_fmt(label, inner, few)}")
-                if isinstance(value, dict) and "paper" in value:
-                    paper.append(f"{key.replace('_', ' ')}: {_paper_fmt(label, value['paper'])}")
-                elif key == "paper_angle_deg":
-                    ours.pop()
-                    paper.append(f"angle between pulls: {value:.0f}°")
-            lines.append(
-                f"| {c['claim']}. {c['statement']} | {c['test']} | {'; '.join(ours)} | {'; '.join(paper)} | "
-                f"**{c['verdict']}**: {c['why']} |"
-            )
-        judged, near = paper_cells(recipe["cells"])
-        cur = recipe["curriculum"]
-        unstable = [p["learner"] for p in cur["learners"] if p["tail_chunks"] and not p["stable"]]
-        lines += [
-            "",
-            f"Table-2 target (success and out within the target's points, time within its fraction, every cell): "
-            f"{len(near)} of {len(judged)} cells.",
-            "",
-            "Curriculum: " + _curriculum_words(cur, unstable),
-            "",
-            "Learned hand damping (mean over networks of each network's median, N s/m) along the field's axes; the"
-            " interval is on the log scale where every network's damping is positive, and plain where one is not"
-            " (a learned damping can be negative):",
-            "",
-            "| learning → test | unstable axis | stable axis | passive, unstable axis |",
-            "|---|---|---|---|",
-        ]
-        for cell in recipe["impedance"]:
-            names = ("damping_unstable", "damping_stable", "passive_damping_unstable")
-            dmp = [interval_text(cell[n], few) for n in names]
-            lines.append(f"| {cell['learning']} → {cell['test']} | " + " | ".join(dmp) + " |")
-        lines.append("")
     return "\n".join(lines)
+
+
+def _claim_row(c: dict, few: int) -> str:
+    """One claim as a table row: its statement, test, our numbers, the paper's and the verdict with its reason."""
+    ours, paper = [], []
+    for key, value in c["numbers"].items():
+        inner = value.get("success", value) if isinstance(value, dict) and "success" in value else value
+        label = f"{key}_success" if isinstance(value, dict) and "success" in value else key
+        ours.append(f"{key.replace('_', ' ')}: {_fmt(label, inner, few)}")
+        if isinstance(value, dict) and "paper" in value:
+            paper.append(f"{key.replace('_', ' ')}: {_paper_fmt(label, value['paper'])}")
+        elif key == "paper_angle_deg":
+            ours.pop()
+            paper.append(f"angle between pulls: {value:.0f}°")
+    why = c["why"] + (
+        f"; depends on collapsed networks: {collapse.names(c['collapsed'])}" if c.get("collapsed") else ""
+    )
+    cells = (
+        f"{c['claim']}. {c['statement']}",
+        c["test"],
+        "; ".join(ours),
+        "; ".join(paper),
+        f"**{c['verdict']}**: {why}",
+    )
+    return "| " + " | ".join(cells) + " |"
+
+
+def _checks(recipe: dict) -> list[str]:
+    """The Table-2 target, the curriculum's stability and, where the evaluation named them, the collapsed networks."""
+    judged, near = paper_cells(recipe["cells"])
+    cur = recipe["curriculum"]
+    unstable = [p["learner"] for p in cur["learners"] if p["tail_chunks"] and not p["stable"]]
+    lines = [
+        "Table-2 target (success and out within the target's points, time within its fraction, every cell): "
+        f"{len(near)} of {len(judged)} cells.",
+        "",
+        "Curriculum: " + _curriculum_words(cur, unstable),
+    ]
+    if "collapsed" in recipe:
+        lines += ["", collapsed_words(recipe)]
+    return lines
+
+
+def collapsed_words(recipe: dict) -> str:
+    """The sentence that names a recipe's collapsed networks (`collapsed` in claims.json), or says there are none."""
+    rule = (
+        f"success below {recipe['collapse_success']:.0%} in the test of their own learning condition, or of the null"
+        " field where theirs is not tested"
+    )
+    if not recipe["collapsed"]:
+        return f"Collapsed networks ({rule}): none."
+    return f"**Collapsed networks** ({rule}): {collapse.names(recipe['collapsed'])}."
+
+
+def _damping_table(recipe: dict) -> list[str]:
+    """The learned hand damping per cell along the field's axes, as a Markdown table with its lead-in."""
+    few = recipe.get("informative_networks", 0)
+    names = ("damping_unstable", "damping_stable", "passive_damping_unstable")
+    return [
+        "Learned hand damping (mean over networks of each network's median, N s/m) along the field's axes; the"
+        " interval is on the log scale where every network's damping is positive, and plain where one is not"
+        " (a learned damping can be negative):",
+        "",
+        "| learning → test | unstable axis | stable axis | passive, unstable axis |",
+        "|---|---|---|---|",
+        *(
+            f"| {cell['learning']} → {cell['test']} | " + " | ".join(interval_text(cell[n], few) for n in names) + " |"
+            for cell in recipe["impedance"]
+        ),
+    ]
 
 
 def _curriculum_words(cur: dict, unstable: list[int]) -> str:

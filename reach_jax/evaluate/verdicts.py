@@ -7,7 +7,8 @@ full evaluation and `redecide` (from the committed eval/ files) decide through `
 from __future__ import annotations
 
 from reach_jax.config import Config
-from reach_jax.evaluate import claims, pulls, stats
+from reach_jax.evaluate import claims, collapse, pulls, stats
+from reach_jax.train.health import is_setback, tail_rows
 
 
 def impedance_cells(summary: dict, nets: list[int], level: float) -> list[dict]:
@@ -53,15 +54,20 @@ def decide(
     verdicts = []
     for k, hypers in enumerate(recipes):
         nets = [i for i in range(len(recipe_of)) if recipe_of[i] == k]
-        cells = claims.Cells([r for r in table["per_network"] if r["recipe"] == k], table["pairs_per_network"])
+        rows = [r for r in table["per_network"] if r["recipe"] == k]
+        cells = claims.Cells(rows, table["pairs_per_network"])
         after_k = pulls.pool_aftereffect([a for a in per_seed if a["recipe"] == k], level)
+        tests, rate = cfg.eval.test_conditions, cfg.claims.collapse_success
+        collapsed = collapse.collapsed_networks(rows, table["pairs_per_network"], tests, rate)
         verdicts.append(
             {
                 "hypers": hypers,
                 "level": level,
                 "informative_networks": cfg.claims.informative_networks,
                 "networks_per_condition": cfg.train.seeds,
-                "claims": claims.recipe_claims(cells, after_k, cfg),
+                "claims": [with_collapsed(c, collapsed) for c in claims.recipe_claims(cells, after_k, cfg)],
+                "collapsed": collapsed,
+                "collapse_success": rate,
                 "aftereffect": after_k,
                 "cells": claims.table_cells(cells, cfg.claims),
                 "impedance": impedance_cells(imp, nets, level),
@@ -71,16 +77,9 @@ def decide(
     return verdicts
 
 
-def tail_rows(rows: list[dict], trials: int, tail: float) -> list[dict]:
-    """A learner's metrics rows that the stability verdict judges: chunks that ended a trial, in the last `tail`
-    of its `trials`.
-
-    Args:
-        rows: one learner's rows of metrics.jsonl, in chunk order.
-        trials: trials planned per learner.
-        tail: the judged fraction of them (cfg.claims.curriculum_tail).
-    """
-    return [r for r in rows if r["chunk_trials"] > 0 and r["trials"] > (1.0 - tail) * trials]
+def with_collapsed(claim: dict, collapsed: list[dict]) -> dict:
+    """A claim's record with the collapsed networks (`collapse.collapsed_networks`) of the conditions it reads."""
+    return {**claim, "collapsed": [n for n in collapsed if n["learning"] in claim["learnings"]]}
 
 
 def curriculum_stability(metrics: list[dict], learners: list[int], trials: int, cfg: Config) -> dict:
@@ -90,11 +89,10 @@ def curriculum_stability(metrics: list[dict], learners: list[int], trials: int, 
     setback when the curriculum distance is below curriculum_min_fraction of the whole field.
     """
     c = cfg.claims
-    full = cfg.sensor.n_cells * cfg.sensor.cell_size
     per = []
     for i in learners:
         rows = tail_rows([r for r in metrics if r["learner"] == i], trials, c.curriculum_tail)
-        setbacks = sum(r["distance_m"] < c.curriculum_min_fraction * full for r in rows)
+        setbacks = sum(is_setback(r, cfg) for r in rows)
         fraction = setbacks / len(rows) if rows else None
         per.append(
             {

@@ -39,7 +39,7 @@ from reach_jax.errors import (
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.store import run_lock
 from reach_jax.store.checkpoint import CheckpointError
-from reach_jax.train import arguments, interrupt
+from reach_jax.train import arguments, health, interrupt
 
 
 class Invocation(NamedTuple):
@@ -171,5 +171,8 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
         sys.stderr.write(error_line(prog, f"write failed, last good checkpoint kept: {exc}"))
         return EXIT_IO
     if jax.process_index() == 0:
+        trouble = health.of_run(inv.prepared.run_dir).summary() or ["no learner collapsed or fell back"]
+        for line in trouble:
+            print(f"{prog}: {line}", file=sys.stderr)
         print(f"run written to {inv.prepared.run_dir}", file=sys.stderr)
     return 0

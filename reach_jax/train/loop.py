@@ -19,8 +19,10 @@ from reach_jax.config.schema import DEFAULT_SPEED, Speed
 from reach_jax.engine import batch, distribute
 from reach_jax.engine.chunk import make_chunk
 from reach_jax.store import checkpoint, run_lock
+from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import interrupt
 from reach_jax.train.core import Finished, NumericsError, chunk_members, finite_learners, merge_members
+from reach_jax.train.health import from_rows
 from reach_jax.train.metrics import metrics_rows, trial_records
 from reach_jax.train.prepare import Prepared, begin, prepare
 from reach_jax.train.sinks import CheckpointSink, MetricsSink, ProgressSink, Sink
@@ -133,7 +135,9 @@ def run(
             sinks = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
             if progress:
                 n_devices = len(devices if devices is not None else jax.devices())
-                sinks.append(ProgressSink(prep.cfg.train.trials, len(table), n_devices, stream))
+                seen = run_dir_io.read_metrics(prep.run_dir, prep.chunk) if prep.chunk else []
+                health = from_rows(seen, prep.cfg, table)  # a resumed run's learners as they stood
+                sinks.append(ProgressSink(prep.cfg.train.trials, health, n_devices, stream))
         started = time.monotonic()
         try:
             for done in chunks(prep, group, devices, stop):

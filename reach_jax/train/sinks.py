@@ -11,6 +11,7 @@ from reach_jax.engine import batch
 from reach_jax.store import checkpoint
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train.core import Finished
+from reach_jax.train.health import Health
 from reach_jax.train.metrics import status_line
 from reach_jax.train.prepare import Prepared
 from reach_jax.train.progress import LearnerEta, Progress
@@ -59,20 +60,23 @@ class CheckpointSink(Sink):
 
 
 class ProgressSink(Sink):
-    """Draws the progress bar with the time left until the slowest learner is done (`LearnerEta`)."""
+    """Draws the progress bar with the time left until the slowest learner is done (`LearnerEta`), and the count
+    of learners collapsed and set back now (`health.Health`)."""
 
-    def __init__(self, budget: int, n_learners: int, n_devices: int, stream=None):
-        self.budget, self.total = budget, budget * n_learners
+    def __init__(self, budget: int, health: Health, n_devices: int, stream=None):
+        n_learners = len(health.learners)
+        self.budget, self.total, self.health = budget, budget * n_learners, health
         self.bar = Progress(self.total, "trials", stream=stream)
         self.eta = LearnerEta(budget, devices=min(n_devices, n_learners))
 
     def chunk(self, done: Finished, rows: list[dict]) -> None:
-        """Redraw with the trials done and each condition's recent success rate."""
+        """Redraw with the trials done, each condition's recent success rate and the learners in trouble."""
         trials = np.asarray(done.states.env.trials)
         left = self.eta.update(trials, done.states.counters.steps, time.monotonic(), done.ran)
-        self.bar.update(
-            int(np.minimum(trials, self.budget).sum()), status_line(rows), eta=left, eta_range=self.eta.band
-        )
+        self.health.update(rows)
+        collapsed, set_back = self.health.counts()
+        line = status_line(rows) + (f" | {collapsed} collapsed, {set_back} set back" if collapsed or set_back else "")
+        self.bar.update(int(np.minimum(trials, self.budget).sum()), line, eta=left, eta_range=self.eta.band)
 
     def close(self) -> None:
         """Draw the bar full and end its line."""
