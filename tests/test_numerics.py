@@ -442,6 +442,35 @@ def test_hand_written_ts_step_equals_autodiff_and_optax(kind, carried):
     np.testing.assert_allclose(np.asarray(u1_next), np.asarray(x_now @ w1_new + b1_new), rtol=RTOL, atol=ATOL)
 
 
+def test_the_actor_target_bound_clips_eq_2s_actor_targets_in_every_path():
+    """hyper actor_target_bound: the targets of the fast path, the autodiff path and the oracle, clipped alike."""
+    params, rng = _random_params(15), _rng(16)
+    pend = {k: jnp.asarray(v) for k, v in _pendings(rng, 125)["regular"].items()}
+    pend["out"] = jnp.asarray([0.1, 0.49, -0.49])  # saturated: eq. 2's targets lie past 0.45
+    pend["rnd"] = jnp.asarray([0.2, -0.2])
+    x_now, lr, n_max, bound = jnp.asarray(rng.uniform(0, 1, 125)), jnp.asarray(0.7), jnp.asarray(30.0), 0.45
+    p_now = jnp.asarray(0.4)  # dp = 0.3: the actor targets move by 0.06 away from 0
+    free = np.asarray(learner.ts_targets(learner.Pending(**pend), p_now, n_max, CFG.learner))
+    clipped = np.asarray(learner.ts_targets(learner.Pending(**pend), p_now, n_max, CFG.learner, 0.0, bound))
+    assert np.all(np.abs(free[1:]) > bound) and np.array_equal(clipped[1:], [bound, -bound])
+    assert clipped[0] == free[0]  # the critic's target is eq. 1's, whatever the bound
+    ref_pend = reference.Pending(**{k: np.asarray(v) for k, v in pend.items()})
+    ref = reference.ts_targets(ref_pend, float(p_now), float(n_max), CFG.learner, 0.0, bound)
+    np.testing.assert_allclose(clipped, ref, rtol=RTOL, atol=ATOL)
+    step = jax.jit(lambda b: learner.ts_step(params, x_now, learner.Pending(**pend), n_max, lr, NET_CFG, None, 0.0, b))
+    update = jax.jit(lambda b: learner.ts_update(params, x_now, learner.Pending(**pend), n_max, lr, NET_CFG, 0.0, b))
+    fast, slow = step(jnp.asarray(bound)), update(jnp.asarray(bound))
+    chex.assert_trees_all_close(fast[0], slow[0], rtol=RTOL, atol=ATOL)
+    layers, _, ref_loss = reference.ts_update(
+        reference.layers_from_flax(params), np.asarray(x_now), ref_pend, float(n_max), float(lr), NET_CFG, 0.0, bound
+    )
+    chex.assert_trees_all_close(
+        jax.tree.map(np.asarray, fast[0]), reference.layers_to_flax(layers), rtol=RTOL, atol=ATOL
+    )
+    assert float(fast[2]) == pytest.approx(ref_loss, rel=RTOL, abs=ATOL)
+    assert float(fast[2]) != pytest.approx(float(step(jnp.asarray(0.0))[2]), rel=1e-6)  # the bound changed the step
+
+
 _TS_STEP_SPARSE = jax.jit(lambda p, x, pe, nm, lr, r: learner.ts_step(p, x, pe, nm, lr, NET_CFG, r))
 
 
@@ -670,9 +699,16 @@ EXPLORATION_FORMS = {
 # The levers of the drift and the actor's step (model §5): a drift gate whose failure share moves fast (time
 # constant 2 trials) from a start below the gate's 0.6, so that it is closed in the first trial, opens after
 # failures and closes again after a clean success; N_max from clean successes only; the actor's signal at half its
-# size. An early, fast drift (from 0.4 s, 4 mm a step) makes drift-aided successes within 200 steps; seeds 4 and
-# 5 then also end trials at each of the goal, a limit and the cap.
-LEVERS = {"drift_gate": 0.6, "drift_gate_trials": 2, "n_max_clean": 1.0, "actor_signal_gain": 0.5}
+# size; the actor's targets within +-0.003 (its outputs reach about 0.004 in these 200 steps). An early, fast
+# drift (from 0.4 s, 4 mm a step) makes drift-aided successes within 200 steps; seeds 4 and 5 then also end trials
+# at each of the goal, a limit and the cap.
+LEVERS = {
+    "drift_gate": 0.6,
+    "drift_gate_trials": 2,
+    "n_max_clean": 1.0,
+    "actor_signal_gain": 0.5,
+    "actor_target_bound": 0.003,
+}
 LEVERS_TASK = {"drift_gate_start": 0.5, "drift_after": 0.4, "drift_per_step": 0.004}
 
 
@@ -703,6 +739,9 @@ def test_rollout_replays_in_oracle(forms, task_forms, seeds):
         state = state.replace(agent=state.agent.replace(params=_float64_params(state.agent.params)))
         final, infos = trace(state, plan, hyper)
         infos = jax.tree.map(np.asarray, infos)
+        if forms.get("actor_target_bound", 0) > 0:  # the bound binds: without it the same steps learn otherwise
+            unbound = trace(state, plan, hyper._replace(actor_target_bound=jnp.zeros_like(hyper.actor_target_bound)))
+            assert not np.array_equal(np.asarray(unbound[1].out), infos.out)
         units = 2.0 * np.asarray(random_stream.step_uniforms(state.key, 0, ROLLOUT_STEPS, cfg))[:, :2] - 1.0
 
         lrn = reference.learner_from_jax(state, ref_plan[0].cond)  # the first block has no catch trials

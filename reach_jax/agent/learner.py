@@ -58,7 +58,12 @@ def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None
 
 
 def ts_targets(
-    pending: Pending, p_now: jax.Array, n_max: jax.Array, cfg: LearnerConfig, baseline: jax.Array = 0.0
+    pending: Pending,
+    p_now: jax.Array,
+    n_max: jax.Array,
+    cfg: LearnerConfig,
+    baseline: jax.Array = 0.0,
+    bound: jax.Array = 0.0,
 ) -> jax.Array:
     """Training signal (3,) for the input x(t-1), from eq. 1 (critic) and eq. 2 (actor).
 
@@ -73,12 +78,15 @@ def ts_targets(
       cfg: learner constants.
       baseline: () share of P_range/N_max taken from dp in the actor's signal (hyper `actor_baseline`): 0 is
         eq. 2 as written, 1 the TD error of eq. 1 (a departure from the paper, model §5).
+      bound: () the actor's targets clipped to [-bound, bound] when it is positive (hyper `actor_target_bound`);
+        0 is eq. 2 as written.
     """
     p_next = jnp.where(pending.terminal, pending.reward, p_now)
     step_cost = cfg.p_range / n_max
     critic = p_next - step_cost
     critic = jnp.where(pending.terminal, critic, jnp.maximum(critic, cfg.critic_floor))
     actor = pending.out[1:] + pending.rnd * pending.gain * (p_next - pending.out[0] - baseline * step_cost)
+    actor = jnp.where(bound > 0, jnp.clip(actor, -bound, bound), actor)
     return jnp.concatenate([critic[None], actor])
 
 
@@ -124,6 +132,7 @@ def ts_step(
     cfg: Config,
     rows_now: jax.Array | None = None,
     baseline: jax.Array = 0.0,
+    bound: jax.Array = 0.0,
 ):
     """Forward x(t), then one TS backprop step on x(t-1) by hand-written SGD; the rollout's hot path.
 
@@ -138,6 +147,7 @@ def ts_step(
       rows_now: optional (20,) int32 rows holding every non-zero coded unit of x(t)
         (`encoding.coded_support`); the layer-1 products then skip the rows that are 0, about 2/3 of them.
       baseline: () the actor signal's baseline (`ts_targets`).
+      bound: () the actor targets' bound (`ts_targets`).
 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss (),
@@ -158,7 +168,7 @@ def ts_step(
         acts.append(tuple(network.squash(jnp.sum(a[:, None] * w, axis=0) + b) for a in acts[-1]))
     out_now, out_prev = acts[-1]
 
-    target = ts_targets(pending, out_now[0], n_max, cfg.learner, baseline)
+    target = ts_targets(pending, out_now[0], n_max, cfg.learner, baseline, bound)
     err = jnp.where(pending.valid, target - out_prev, 0.0)
     loss = 0.5 * jnp.sum(err**2)
     step = jnp.where(pending.valid, lr, 0.0)
@@ -180,7 +190,14 @@ def ts_step(
 
 
 def ts_update(
-    params, x_now: jax.Array, pending: Pending, n_max: jax.Array, lr: jax.Array, cfg: Config, baseline: jax.Array = 0.0
+    params,
+    x_now: jax.Array,
+    pending: Pending,
+    n_max: jax.Array,
+    lr: jax.Array,
+    cfg: Config,
+    baseline: jax.Array = 0.0,
+    bound: jax.Array = 0.0,
 ):
     """The TS step by its readable definition: flax forward, autodiff backprop, optax SGD.
 
@@ -194,6 +211,7 @@ def ts_update(
       lr: () learning rate.
       cfg: model config.
       baseline: () the actor signal's baseline (`ts_targets`).
+      bound: () the actor targets' bound (`ts_targets`).
 
     Returns:
       (params W(t+1), outputs (3,) at x(t) computed with W(t), squared-error loss ()).
@@ -201,7 +219,7 @@ def ts_update(
 
     def loss_fn(p):
         out = network.apply(p, jnp.stack([x_now, pending.x]), cfg)
-        target = jax.lax.stop_gradient(ts_targets(pending, out[0, 0], n_max, cfg.learner, baseline))
+        target = jax.lax.stop_gradient(ts_targets(pending, out[0, 0], n_max, cfg.learner, baseline, bound))
         err = target - out[1]
         return 0.5 * jnp.where(pending.valid, jnp.sum(err**2), 0.0), out[0]
 

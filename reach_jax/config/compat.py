@@ -26,7 +26,11 @@ ADDED_CONFIG_FIELDS = {
     },
     7: {"train": {"zip_grids": False}},
     8: {"claims": {"informative_networks": 4}},
-    11: {"claims": {"collapse_success": 0.5, "collapse_trials": 10_000}},
+    11: {
+        "learner": {"actor_target_bound": 0.0},
+        "claims": {"collapse_success": 0.5, "collapse_trials": 10_000},
+        "train": {"actor_target_bound_grid": []},
+    },
 }
 
 # Defaults changed with a config version, at their values before it: a version-1 config, which left out the

@@ -134,6 +134,15 @@ TABLE = (
         words="actor-only gain {v:g}",
     ),
     Hyperparameter(
+        "actor_target_bound",
+        0.0,
+        "a: eq. 2's actor targets clipped to [-a, a], so that no target drives an actor output into saturation, where "
+        "its gradient and the noise's effect on the torque vanish; 0 = off, eq. 2 (departs from it, model §5)",
+        high=0.5,
+        neutral=0.0,
+        words="actor targets within ±{v:g}",
+    ),
+    Hyperparameter(
         "drift_neutral_early",
         0.0,
         "true: a drift-aided success leaves the curriculum unchanged before the first full field too (model §5 choice)",

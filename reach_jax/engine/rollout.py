@@ -58,7 +58,15 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
     pending_in = agent.pending if sparse else agent.pending._replace(rows=None)
     lr = jnp.where(learns, hyper.lr, 0.0)
     params, out, loss, u1 = learner.ts_step(
-        agent.params, x, pending_in, agent.n_max, lr, cfg, rows if sparse else None, hyper.actor_baseline
+        agent.params,
+        x,
+        pending_in,
+        agent.n_max,
+        lr,
+        cfg,
+        rows if sparse else None,
+        hyper.actor_baseline,
+        hyper.actor_target_bound,
     )
     cur = state.env.curriculum
     scale = exploration.value_scale(hyper, out[0], cur.full_at, curriculum.shortfall(cur, cfg), state.env.trial.t)

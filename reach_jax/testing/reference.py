@@ -463,10 +463,13 @@ class Pending:
     gain: float = 1.0  # factor on the actor's signal (the value scaling's factor to -actor_gain_power)
 
 
-def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig, baseline: float = 0.0) -> np.ndarray:
-    """Eq. 1 (critic, floored unless terminal) and eq. 2 (actor), with the actor's optional baseline.
+def ts_targets(
+    pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig, baseline: float = 0.0, bound: float = 0.0
+) -> np.ndarray:
+    """Eq. 1 (critic, floored unless terminal) and eq. 2 (actor), with the actor's optional baseline and bound.
 
-    Args: p_now () p(t), n_max () [steps], baseline () share of P_range/N_max taken from dp (0: eq. 2).
+    Args: p_now () p(t), n_max () [steps], baseline () share of P_range/N_max taken from dp (0: eq. 2), bound ()
+      the actor's targets clipped to [-bound, bound] when positive (0: eq. 2).
     Returns: (3,) targets.
     """
     p_next = pending.reward if pending.terminal else p_now  # reinforcement stands in for p(t) at a trial's end
@@ -476,6 +479,8 @@ def ts_targets(pending: Pending, p_now: float, n_max: float, cfg: LearnerConfig,
     p_prev = pending.out[0]
     signal = p_next - p_prev - baseline * cfg.p_range / n_max  # dp of eq. 2, less the baseline
     actor = [pending.out[1 + j] + pending.rnd[j] * pending.gain * signal for j in range(2)]  # eq. 2
+    if bound > 0:
+        actor = [min(bound, max(-bound, a)) for a in actor]
     return np.array([critic, actor[0], actor[1]])
 
 
@@ -530,16 +535,18 @@ def exploration_noise(unit, bound: float, scale: float, prev, trials: int, h: di
     return np.array([rho * prev[j] + math.sqrt(1.0 - rho * rho) * b * unit[j] for j in range(2)])
 
 
-def ts_update(layers, x_now, pending: Pending, n_max: float, lr: float, cfg: Config, baseline: float = 0.0):
+def ts_update(
+    layers, x_now, pending: Pending, n_max: float, lr: float, cfg: Config, baseline: float = 0.0, bound: float = 0.0
+):
     """Outputs at x(t) with W(t), then one TS step on x(t-1).
 
-    Args: x_now (125,), n_max () [steps], lr (), baseline () of the actor's signal (`ts_targets`).
+    Args: x_now (125,), n_max () [steps], lr (), baseline () and bound () of the actor's signal (`ts_targets`).
     Returns: (layers, out (3,), loss ()).
     """
     out_now = forward(layers, x_now)[-1]
     if not pending.valid:
         return layers, out_now, 0.0
-    target = ts_targets(pending, out_now[0], n_max, cfg.learner, baseline)
+    target = ts_targets(pending, out_now[0], n_max, cfg.learner, baseline, bound)
     new, loss = sgd_step(layers, pending.x, target, lr, cfg.network.use_bias)
     return new, out_now, loss
 
@@ -803,7 +810,8 @@ def learner_step(lrn: Learner, plan: list[Block], h: dict, bound: float, unit, d
     cond = lrn.cond
     x = observe(lrn.arm, lrn.prev_arm, lrn.prev_tau, lrn.target, cond.input_mask, cfg)
     lr = h["lr"] if lrn.pending_learning else 0.0
-    layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg, h["actor_baseline"])
+    target_bound = h["actor_target_bound"]
+    layers, out, loss = ts_update(lrn.layers, x, lrn.pending, lrn.n_max, lr, cfg, h["actor_baseline"], target_bound)
     scale = value_scale(out[0], lrn.was_full, 1.0 - lrn.distance / curriculum_bounds(cfg)[1], lrn.t, h)
     rnd = exploration_noise(unit, bound, scale, lrn.pending.rnd, lrn.trials, h)
     tau = torque(out[1:], rnd, cfg)
