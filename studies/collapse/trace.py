@@ -123,6 +123,7 @@ def fold_trials(steps: dict) -> dict[str, np.ndarray]:
     """One record per trial that ended among the steps (each array (n_steps, ...)): means over its steps, and its
     outcome, length and the state at its end. Steps after the last ended trial are left out."""
     ended = np.flatnonzero(steps["ended"])
+    steps = {k: v[: ended[-1] + 1] for k, v in steps.items()}  # reduceat's last sum would run to the end
     starts = np.concatenate([[0], ended[:-1] + 1])
     counts = ended - starts + 1
     out = {"length": counts, "goal": steps["goal"][ended], "out": steps["out"][ended], "cap": steps["cap"][ended]}
@@ -158,7 +159,9 @@ def main(argv=None) -> int:
     trials = {k: np.concatenate([f[k] for f in folded]) for k in folded[0]}
     trials["chunk"] = np.concatenate([np.full(len(f["length"]), args.from_chunk + i + 1) for i, f in enumerate(folded)])
     args.out.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(args.out / "trials.npz", **trials)
+    np.savez_compressed(
+        args.out / "trials.npz", **{k: v.astype(np.float32) if v.dtype == np.float64 else v for k, v in trials.items()}
+    )
     report = {
         "run": str(args.run),
         "learner": args.learner,
