@@ -73,15 +73,20 @@ def coverage(interval, draw, truth: float, rounds: int = 2000) -> float:
 
 
 def test_t_quantiles_and_intervals():
-    # Textbook two-sided 95% values of Student's t.
-    for df, value in [(1, 12.706), (2, 4.303), (7, 2.365), (30, 2.042)]:
-        assert stats.t_quantile(0.975, df) == pytest.approx(value, abs=1e-3)
-    assert stats.t_quantile(0.5, 5) == pytest.approx(0.0, abs=1e-9)
-    assert stats.t_cdf(stats.t_quantile(0.9, 3), 3) == pytest.approx(0.9, abs=1e-10)
-    x = np.array([1.0, 2.0, 3.0, 4.0])
-    ci = stats.mean_ci(x)
-    half = stats.t_quantile(0.975, 3) * x.std(ddof=1) / 2.0
-    assert (ci["mean"], ci["low"], ci["high"], ci["n"]) == pytest.approx((2.5, 2.5 - half, 2.5 + half, 4))
+    # The half-width over sd / sqrt(n) is Student's t of n - 1 degrees of freedom: textbook two-sided values at 95%
+    # and 90%, and none at level 0.
+    rng = np.random.default_rng(1)
+    for n, level, value in [(2, 0.95, 12.706), (3, 0.95, 4.303), (8, 0.95, 2.365), (31, 0.95, 2.042), (4, 0.9, 2.353)]:
+        x = rng.normal(size=n)
+        ci = stats.mean_ci(x, level)
+        assert (ci["high"] - ci["low"]) / 2 / (x.std(ddof=1) / np.sqrt(n)) == pytest.approx(value, abs=1e-3)
+    assert stats.mean_ci([1.0, 2.0, 4.0], 0.0)["low"] == pytest.approx(stats.mean_ci([1.0, 2.0, 4.0])["mean"])
+    # To full precision: with 1 degree of freedom t is Cauchy's tan(pi (p - 1/2)); with 3, the root of its
+    # closed-form CDF, found to 30 digits (mpmath).
+    for x, t in [([1.0, 2.0], math.tan(math.pi * 0.475)), ([1.0, 2.0, 3.0, 4.0], 3.1824463052837096)]:
+        x = np.array(x)
+        ci, half = stats.mean_ci(x), t * x.std(ddof=1) / math.sqrt(len(x))
+        assert (ci["low"], ci["high"]) == pytest.approx((x.mean() - half, x.mean() + half), rel=1e-14)
     assert stats.mean_ci([3.0])["low"] is None and not stats.above(stats.mean_ci([3.0]), 0.0)
     assert stats.paired_ci([3, 4, 5], [1, 1, 1])["mean"] == pytest.approx(3.0)
     assert stats.ratio_ci([2, 2, 2], [1, 1, 1])["mean"] == pytest.approx(2.0)

@@ -1,5 +1,5 @@
-"""Fig. 4 hand paths and Fig. 5 speed profiles (section 4.4), with the panels they show and the corner cells their
-movements run between (matplotlib).
+"""Fig. 4 hand paths and Fig. 5 speed profiles (section 4.4), with the panels they show, the corner cells their
+movements run between and those movements on their own (matplotlib).
 
 Units: positions [m] in the shoulder frame (x right, y forward), speeds [m/s], times [s].
 Every function returns a matplotlib Figure (not registered with pyplot, so nothing to close); the caller saves it.
@@ -7,6 +7,7 @@ Every function returns a matplotlib Figure (not registered with pyplot, so nothi
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -14,6 +15,7 @@ from matplotlib.patches import Rectangle
 
 from reach_jax.config import Config
 from reach_jax.env import OUTCOME_NAMES, SUCCESS, task
+from reach_jax.evaluate import episodes, lattice
 from reach_jax.physics import sensor
 
 # Fig. 4 panels: (letter, learning condition, test condition).
@@ -45,6 +47,22 @@ def corner_pairs(cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     c = corner_centres(cfg)
     idx = np.array([(i, j) for i in range(len(c)) for j in range(len(c)) if i != j])
     return c[idx[:, 0]], c[idx[:, 1]], idx[:, 0]
+
+
+def corner_episodes(params, masks, cfg: Config) -> episodes.Episode:
+    """Every network's Fig. 4 movements (`corner_pairs`) under every test condition, without the lattice's 1040.
+
+    Args:
+      params: the networks' parameters, leading network axis N (`store.run_dir.load_params`).
+      masks: (N, 125) input masks of their learning conditions.
+      cfg: the run's config; cfg.eval.test_conditions are the C tests.
+
+    Returns:
+      NumPy episodes, leading axes (N, C, 12).
+    """
+    starts, targets, _ = corner_pairs(cfg)
+    policy, fields = episodes.network_policy(cfg), lattice.test_fields(cfg)
+    return jax.device_get(episodes.run_episodes(policy, params, masks, fields, starts, targets, cfg)[0])
 
 
 # Paper's Fig. 4 legend: upper left filled squares, lower left empty squares, upper right x, lower right
