@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -36,7 +36,9 @@ ADDED_CONFIG_FIELDS = {
 # Defaults changed with a config version, at their values before it: a version-1 config, which left out the
 # fields added during its life, trained with these where it lacks them. Version 9 made round 4's held-out pick the
 # default recipe; version 10 put the recipe of version 8 back, since the pick collapsed learners in both runs of the
-# main command (model §11). The pick is `recipes/round4_pick.json`.
+# main command (model §11). Version 12 made the pick with eq. 2's actor targets clipped to ±0.45 the default, by
+# issue 49's adoption rule (no collapse on held-out seeds, studies/collapse/verdict.md). The pick without the clip is
+# `recipes/round4_pick.json`; the recipe of versions 10-11 is `recipes/constant_exploration.json`.
 CHANGED_DEFAULTS = {
     9: {
         "learner": {
@@ -65,6 +67,21 @@ CHANGED_DEFAULTS = {
             "drift_gate": 0.401,
         },
         "task": {"max_trial_time": 4.0},
+    },
+    12: {
+        "learner": {
+            "lr": 1.0,
+            "noise": 0.2,
+            "lam": 0.999,
+            "noise_final_ratio": 1.0,
+            "noise_anneal_delay": 0,
+            "noise_value_ratio": 1.0,
+            "noise_corr": 0.0,
+            "actor_signal_gain": 1.0,
+            "actor_target_bound": 0.0,
+            "drift_gate": 0.0,
+        },
+        "task": {"max_trial_time": 10.0},
     },
 }
 

@@ -69,7 +69,7 @@ def main(argv=None) -> int:
             for i, r in enumerate(least)
         ),
     ]
-    base = hyper.defaults()
+    base = hyper.defaults(11)  # the default of config versions 10-11, the control
     recipes = [{**c, "hypers": {**base, **c["hypers"], "actor_target_bound": BOUND}} for c in chosen]
     varied = [n for n in KNOBS if len({r["hypers"][n] for r in recipes}) > 1]
     train = {f"{n}_grid": [r["hypers"][n] for r in recipes] for n in varied}

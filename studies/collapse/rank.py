@@ -25,6 +25,7 @@ from reach_jax.store import run_dir
 SCRIPT = "studies/collapse/rank.py"
 STABLE_SHARE = 15 / 16  # at least 15 of 16 learners stable (PLAN.md), the held-out rule's 30 of 32
 HELDOUT_SEED, HELDOUT_NETWORKS = 20261204, 8  # PLAN.md: no committed run has used this master seed
+BASELINE = hyper.defaults(11)  # the default recipe while the batch trained (config versions 10-11): recipes' words
 
 
 def _objective():
@@ -63,7 +64,7 @@ def candidate(recs: list[dict]) -> dict:
 def heldout_config(run: Path, pick: dict) -> dict:
     """The held-out run's config: the candidate's hyperparameters on the held-out seed, the batch's cap and chunk."""
     cfg = run_dir.read_config(run)
-    full = {**hyper.defaults(), **pick["hypers"]}
+    full = {**BASELINE, **pick["hypers"]}
     # The batch stores float32: each value as its shortest float32 decimal, as the recipe was given.
     learner = {h.name: int(full[h.name]) if h.integer else float(str(np.float32(full[h.name]))) for h in hyper.TABLE}
     train = {"seeds": HELDOUT_NETWORKS, "seed": HELDOUT_SEED, "trials": cfg.train.trials}
@@ -86,9 +87,9 @@ def markdown(recs: list[dict], pick: dict, command: str) -> str:
         damping = "–" if r["damping_none"] is None else f"{r['damping_none']:.1f}"
         lines.append(
             f"| {r['recipe']} | {collapsed} | {r['stable_learners']}/{r['learners']} | {r['D']:.1f} | {damping} |"
-            f" {verdicts} | {hyper.describe(r['hypers'])} |"
+            f" {verdicts} | {hyper.describe(r['hypers'], BASELINE)} |"
         )
-    lines += ["", f"**Candidate for the held-out run:** recipe {pick['recipe']}, {hyper.describe(pick['hypers'])}."]
+    lines += ["", f"**Candidate for the held-out run:** recipe {pick['recipe']}, {hyper.describe(pick['hypers'], BASELINE)}."]
     return "\n".join(lines) + "\n"
 
 
