@@ -48,7 +48,7 @@ def _metrics(run: Path) -> list[dict]:
             if isinstance(r, dict):
                 columns = r.get("columns", columns)
                 continue
-            rows.append({k: v for k, v in zip(columns, r) if k != "wall_s"})
+            rows.append({k: v for k, v in zip(columns, r, strict=True) if k != "wall_s"})
     return rows
 
 
@@ -69,7 +69,9 @@ def compare(a: Path, b: Path) -> list[str]:
                     diffs.append(f"{name}: {k}")
     ma, mb = _metrics(a), _metrics(b)
     if ma != mb:
-        diffs.append(f"metrics: {sum(x != y for x, y in zip(ma, mb)) + abs(len(ma) - len(mb))} rows differ")
+        diffs.append(
+            f"metrics: {sum(x != y for x, y in zip(ma, mb, strict=False)) + abs(len(ma) - len(mb))} rows differ"
+        )
     trials = sorted(p.relative_to(a) for p in (a / "trials").rglob("*") if p.is_file())
     for t in trials:
         if not (b / t).is_file() or (a / t).read_bytes() != (b / t).read_bytes():

@@ -82,28 +82,29 @@ def test_version_1_fields_added_since_read_as_what_those_runs_trained_with():
     del stored["learner"]["noise_corr"]  # came in neutral
     cfg = from_dict(stored)
     assert cfg.task.drift_neutral_when_full is False
-    assert cfg.learner.noise_corr == 0.0  # white, as every default but version 9's
+    assert cfg.learner.noise_corr == 0.0  # white, as every default but those of versions 9 and 12 on
     stored["task"]["drift_neutral_when_full"] = True
-    assert from_dict(stored) == Config()
+    assert from_dict(stored) == Config(learner=LearnerConfig(noise_corr=0.0))
 
 
 def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_before():
-    """Version 9 made round 4's pick the default and version 10 put the old recipe back; a version-1 config without
-    those fields trained the old recipe, today's default again."""
-    old, pick = compat.CHANGED_DEFAULTS[9], compat.CHANGED_DEFAULTS[10]
-    assert old.keys() == pick.keys() and all(old[s].keys() == pick[s].keys() for s in old)
-    stored = {**to_dict(Config(learner=LearnerConfig(**pick["learner"]))), "version": 1}
-    for section, fields in old.items():
+    """Version 9 made round 4's pick the default, version 10 put the old recipe back and version 12 made the pick
+    with its actor targets clipped the default; a version-1 config without those fields trained the old recipe."""
+    old, pick, before_12 = compat.CHANGED_DEFAULTS[9], compat.CHANGED_DEFAULTS[10], compat.CHANGED_DEFAULTS[12]
+    assert old.keys() == pick.keys() == before_12.keys() and all(old[s].keys() == pick[s].keys() for s in old)
+    assert before_12 == {**old, "learner": {**old["learner"], "actor_target_bound": 0.0}}
+    stored = {**to_dict(Config()), "version": 1}
+    for section, fields in before_12.items():
         for name in fields:
             del stored[section][name]
     cfg = from_dict(stored)
-    for section, fields in old.items():
+    for section, fields in before_12.items():
         for name, value in fields.items():
-            assert getattr(getattr(cfg, section), name) == value == getattr(getattr(Config(), section), name), name
-            assert value != pick[section][name], name
-    assert hyper.defaults(8) == hyper.defaults() == {**hyper.defaults(), **old["learner"]}
-    assert hyper.defaults(9) == {**hyper.defaults(), **pick["learner"]} != hyper.defaults()
-    assert hyper.defaults(10) == hyper.defaults()
+            assert getattr(getattr(cfg, section), name) == value != getattr(getattr(Config(), section), name), name
+    today = hyper.defaults()
+    assert hyper.defaults(8) == hyper.defaults(10) == hyper.defaults(11) == {**today, **before_12["learner"]}
+    assert hyper.defaults(9) == {**today, **pick["learner"], "actor_target_bound": 0.0}
+    assert hyper.defaults(12) == today == {**hyper.defaults(9), "actor_target_bound": 0.45}
     stored = {**to_dict(Config(learner=LearnerConfig(**pick["learner"]))), "version": 9}  # complete: its values stand
     assert from_dict(stored).learner == LearnerConfig(**pick["learner"])
     del stored["learner"]["lr"]
@@ -111,14 +112,17 @@ def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_
         from_dict(stored)
 
 
-def test_the_named_recipe_of_round_4_is_version_9s_default_one_config_away():
-    """recipes/round4_pick.json spells config version 9's default recipe, the values `CHANGED_DEFAULTS[10]` holds."""
-    data = read_config_file(Path(__file__).resolve().parents[1] / "recipes" / "round4_pick.json")
+@pytest.mark.parametrize(
+    ("recipe", "version"), [("round4_pick", 9), ("constant_exploration", 10), ("constant_exploration", 11)]
+)
+def test_a_named_recipe_is_an_earlier_default_one_config_away(recipe, version):
+    """recipes/round4_pick.json spells config version 9's default recipe, recipes/constant_exploration.json that of
+    versions 10-11 (and 1-8): the values `CHANGED_DEFAULTS` holds."""
+    data = read_config_file(Path(__file__).resolve().parents[1] / "recipes" / f"{recipe}.json")
     assert "comment" not in data  # read and dropped
     cfg = checked_config(data)
-    pick = compat.CHANGED_DEFAULTS[10]
-    for section, fields in pick.items():
-        assert {n: getattr(getattr(cfg, section), n) for n in fields} == fields
+    assert {n: getattr(cfg.learner, n) for n in hyper.NAMES} == hyper.defaults(version)
+    assert cfg.task.max_trial_time == compat.defaults_of(version, "task", {"max_trial_time": None})["max_trial_time"]
     assert dataclasses.replace(cfg, learner=Config().learner, task=Config().task) == Config()
 
 
@@ -134,7 +138,7 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10 or 11, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11 or 12, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
 
 

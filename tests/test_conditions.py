@@ -45,9 +45,9 @@ def test_a_user_condition_is_added_to_the_paper_four_and_round_trips():
 
 def test_a_stored_force_section_becomes_the_paper_conditions_fields():
     # Configs written before conditions were data held the viscous matrix and the random bound in `force`; they
-    # came before the drift-neutral staircase and the recipe of config version 9 too.
+    # came before the drift-neutral staircase and the recipes of config versions 9 and 12 too.
     old = {"version": 1, "force": {"viscous": [[-10.1, -11.2], [-11.2, 11.1]], "random_amplitude": 8.0}}
-    then = compat.CHANGED_DEFAULTS[9]
+    then = compat.CHANGED_DEFAULTS[12]
     task_then = TaskConfig(drift_neutral_when_full=False, **then["task"])
     assert from_dict(old) == dataclasses.replace(Config(), learner=LearnerConfig(**then["learner"]), task=task_then)
     changed = from_dict({"version": 1, "force": {"random_amplitude": 5.0}})

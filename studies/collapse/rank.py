@@ -89,7 +89,10 @@ def markdown(recs: list[dict], pick: dict, command: str) -> str:
             f"| {r['recipe']} | {collapsed} | {r['stable_learners']}/{r['learners']} | {r['D']:.1f} | {damping} |"
             f" {verdicts} | {hyper.describe(r['hypers'], BASELINE)} |"
         )
-    lines += ["", f"**Candidate for the held-out run:** recipe {pick['recipe']}, {hyper.describe(pick['hypers'], BASELINE)}."]
+    lines += [
+        "",
+        f"**Candidate for the held-out run:** recipe {pick['recipe']}, {hyper.describe(pick['hypers'], BASELINE)}.",
+    ]
     return "\n".join(lines) + "\n"
 
 
