@@ -39,8 +39,8 @@ def make(out: Path, extra: list[str]) -> None:
     subprocess.run(cmd, check=True)
 
 
-def _metrics(run: Path) -> list[dict]:
-    """Every metrics row of a run as a dict, wall time dropped."""
+def _metrics(run: Path) -> list[list]:
+    """Every metrics row of a run as its (column, value) pairs in the file's order, wall time dropped."""
     rows, columns = [], None
     with gzip.open(run / "metrics.jsonl.gz", "rt") as f:
         for line in f:
@@ -48,7 +48,7 @@ def _metrics(run: Path) -> list[dict]:
             if isinstance(r, dict):
                 columns = r.get("columns", columns)
                 continue
-            rows.append({k: v for k, v in zip(columns, r, strict=True) if k != "wall_s"})
+            rows.append([(k, v) for k, v in zip(columns, r, strict=True) if k != "wall_s"])
     return rows
 
 

@@ -12,6 +12,7 @@ PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "reach_jax"
 LAYERS = ("errors", "config", "physics", "env", "agent", "engine", "store", "train", "evaluate", "testing")
 FACES = ("__init__.py", "__main__.py")  # a package's face may be short
 MOST_LINES, FEWEST_LINES = 300, 40
+MOST_FUNCTION_LINES = 50  # a library function, from its `def` to its last line, docstring included
 
 
 def _modules(root: pathlib.Path) -> dict[str, pathlib.Path]:
@@ -90,6 +91,30 @@ def test_no_module_is_long_or_a_stub():
     sizes = {p: len(p.read_text().splitlines()) for p in PACKAGE.rglob("*.py")}
     assert [str(p) for p, n in sizes.items() if n > MOST_LINES and p.parent.name != "testing"] == []
     assert [str(p) for p, n in sizes.items() if n < FEWEST_LINES and p.name not in FACES] == []
+
+
+def _long_functions(root: pathlib.Path) -> list[str]:
+    """Every function or method under root longer than MOST_FUNCTION_LINES, as "path:line name (lines)"."""
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                lines = node.end_lineno - (node.decorator_list[0].lineno if node.decorator_list else node.lineno) + 1
+                if lines > MOST_FUNCTION_LINES:
+                    found.append(f"{path}:{node.lineno} {node.name} ({lines})")
+    return found
+
+
+def test_no_library_function_is_over_50_lines():
+    assert _long_functions(PACKAGE) == []
+
+
+def test_the_length_check_sees_a_long_function_and_counts_its_decorator(tmp_path):
+    body = "".join(f"    x{i} = {i}\n" for i in range(MOST_FUNCTION_LINES - 2))
+    (tmp_path / "a.py").write_text(
+        f"def fits():\n{body}    return 0\n\n\n@staticmethod\ndef over():\n{body}    return 0\n"
+    )
+    assert [f.split(" ", 1)[1] for f in _long_functions(tmp_path)] == [f"over ({MOST_FUNCTION_LINES + 1})"]
 
 
 @pytest.fixture

@@ -123,6 +123,59 @@ def _layer1_sgd(w1: jax.Array, x: jax.Array, scaled: jax.Array, rows: jax.Array 
     return w1.at[rows].add(-x[rows][:, None] * scaled, indices_are_sorted=True, unique_indices=True)
 
 
+def _forward_pair(layers, x_now: jax.Array, pending: Pending, rows_now: jax.Array | None, n_visual: int):
+    """The inputs of every layer for x(t) and x(t-1) under W(t), and x(t)'s layer-1 pre-activation.
+
+    Args:
+      layers: the dense layers [(w, b)] of W(t), input layer first (`network.dense_layers`).
+      x_now: (125,) input x(t).
+      pending: the step t-1; its `u1`, if set, stands in for x(t-1)'s layer-1 product.
+      rows_now: optional (20,) int32 rows holding every non-zero coded unit of x(t).
+      n_visual: the visual rows, the first of the input.
+
+    Returns:
+      (acts, u1_now): acts[i] = (input of layer i for x(t), for x(t-1)), the last pair the outputs (3,);
+      u1_now (hidden,).
+    """
+    w1, b1 = layers[0]
+    u1_now = _layer1_input_product(x_now, w1, rows_now, n_visual) + b1
+    u1_prev = pending.u1 if pending.u1 is not None else _layer1_input_product(pending.x, w1, None, n_visual) + b1
+    # The raw input row of x(t) is not needed again. Each row is its own multiply-and-reduce over the leading
+    # axis: a stacked (2, n) @ W as one reduction over the middle axis compiled to a far slower kernel on CPU
+    # (measured, layer 2 alone cost more than layer 1).
+    acts = [(x_now, pending.x), (network.squash(u1_now), network.squash(u1_prev))]
+    for w, b in layers[1:]:
+        acts.append(tuple(network.squash(jnp.sum(a[:, None] * w, axis=0) + b) for a in acts[-1]))
+    return acts, u1_now
+
+
+def _backprop_sgd(layers, acts, delta: jax.Array, step: jax.Array, rows: jax.Array | None, n_visual: int):
+    """Backprop on the x(t-1) row through the old weights, each layer's SGD step taken as the signal passes it.
+
+    Args:
+      layers: the dense layers [(w, b)] of W(t), input layer first.
+      acts: each layer's inputs for (x(t), x(t-1)) (`_forward_pair`).
+      delta: (3,) the output layer's error signal, -err f'(u).
+      step: () the step size; 0 leaves every weight as it is.
+      rows: x(t-1)'s coded rows that may be non-zero (`Pending.rows`); None: every row.
+      n_visual: the visual rows, the first of the input.
+
+    Returns:
+      (the layers of W(t+1), the layer-1 error signal delta1 (hidden,)).
+    """
+    new_layers = [None] * len(layers)
+    for i in range(len(layers) - 1, -1, -1):
+        w, b = layers[i]
+        below = acts[i][1]
+        scaled = step * delta
+        if i > 0:
+            new_layers[i] = (w - below[:, None] * scaled, b - scaled)
+            delta = jnp.sum(w * delta, axis=1) * _squash_slope(below)
+        else:
+            new_layers[i] = (_layer1_sgd(w, below, scaled, rows, n_visual), b - scaled)
+    return new_layers, delta
+
+
 def ts_step(
     params,
     x_now: jax.Array,
@@ -155,35 +208,15 @@ def ts_step(
       or 32 inside the compiled loops (`chunk.widen_hidden`)).
     """
     layers = network.dense_layers(params)
-    w1, b1 = layers[0]
     n_visual = cfg.sensor.n_cells**2
-    u1_now = _layer1_input_product(x_now, w1, rows_now, n_visual) + b1
-    u1_prev = pending.u1 if pending.u1 is not None else _layer1_input_product(pending.x, w1, None, n_visual) + b1
-    # acts[i] = (input of layer i for x(t), for x(t-1)); the raw input row of x(t) is not needed again.
-    # Each row is its own multiply-and-reduce over the leading axis: a stacked (2, n) @ W as one
-    # reduction over the middle axis compiled to a far slower kernel on CPU (measured, layer 2 alone
-    # cost more than layer 1).
-    acts = [(x_now, pending.x), (network.squash(u1_now), network.squash(u1_prev))]
-    for w, b in layers[1:]:
-        acts.append(tuple(network.squash(jnp.sum(a[:, None] * w, axis=0) + b) for a in acts[-1]))
+    acts, u1_now = _forward_pair(layers, x_now, pending, rows_now, n_visual)
     out_now, out_prev = acts[-1]
 
     target = ts_targets(pending, out_now[0], n_max, cfg.learner, baseline, bound)
     err = jnp.where(pending.valid, target - out_prev, 0.0)
     loss = 0.5 * jnp.sum(err**2)
     step = jnp.where(pending.valid, lr, 0.0)
-    # Backprop on the x(t-1) row, through the old weights; the SGD step of each layer follows.
-    delta = -err * _squash_slope(out_prev)
-    new_layers = [None] * len(layers)
-    for i in range(len(layers) - 1, -1, -1):
-        w, b = layers[i]
-        below = acts[i][1]
-        scaled = step * delta
-        if i > 0:
-            new_layers[i] = (w - below[:, None] * scaled, b - scaled)
-            delta = jnp.sum(w * delta, axis=1) * _squash_slope(below)
-        else:
-            new_layers[i] = (_layer1_sgd(w, below, scaled, pending.rows, n_visual), b - scaled)
+    new_layers, delta = _backprop_sgd(layers, acts, -err * _squash_slope(out_prev), step, pending.rows, n_visual)
     bias_input = 1.0 if cfg.network.use_bias else 0.0
     u1_next = u1_now - step * delta * (jnp.dot(pending.x, x_now) + bias_input)
     return network.with_dense_layers(params, new_layers), out_now, loss, u1_next

@@ -104,14 +104,9 @@ def learner_step(
     params, out, loss, u1, rnd, gain, tau = act(state, x, rows, unit, hyper, learns, cfg, speed)
     params_env = env.env_params(plan, hyper)
     new_env, outcome = env.step(state.env, tau, draws, params_env, cfg)
-    goal, out_of_range, done = outcome.goal, outcome.out_of_range, env.ended(outcome)
-    reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)
-    terminal = goal | out_of_range
-    pending = learner.Pending(
-        x=x, out=out, rnd=rnd, valid=~outcome.cap, terminal=terminal, reward=reward, u1=u1, rows=rows, gain=gain
-    )
+    pending = _pending(outcome, cfg, x=x, out=out, rnd=rnd, u1=u1, rows=rows, gain=gain)
     # With hyper n_max_clean a drift-aided success leaves N_max as it is (eq. 3 on clean successes only).
-    counted = goal & ~((hyper.n_max_clean > 0) & trial.drifted)
+    counted = outcome.goal & ~((hyper.n_max_clean > 0) & trial.drifted)
     n_max = jnp.where(counted, learner.update_n_max(agent.n_max, outcome.t, hyper.lam), agent.n_max)
     trace, record = trace_step(state, new_env, outcome, cfg)
     new = state.replace(
@@ -123,20 +118,24 @@ def learner_step(
         trace=trace,
     )
     info = StepInfo(
-        x=x,
-        out=out,
-        rnd=rnd,
-        tau=tau,
-        arm=outcome.arm,
-        draws=draws,
-        goal=goal,
-        out_of_range=out_of_range,
-        cap=outcome.cap,
-        loss=loss,
-        ended=done,
-        record=record,
-    )
+        arm=outcome.arm, goal=outcome.goal, out_of_range=outcome.out_of_range, cap=outcome.cap,
+        ended=env.ended(outcome),
+        record=record, x=x, out=out, rnd=rnd, tau=tau, draws=draws, loss=loss,
+    )  # fmt: skip
     return new, info
+
+
+def _pending(outcome: env.TrialStatus, cfg: Config, **step) -> learner.Pending:
+    """This step as the next one learns from it: eq. 1's reward at its end, and no learning from a capped step.
+
+    Args:
+      outcome: the environment's step.
+      cfg: model config (the rewards).
+      **step: the step's x, out, rnd, u1, rows and gain (`learner.Pending`).
+    """
+    goal, out_of_range = outcome.goal, outcome.out_of_range
+    reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)
+    return learner.Pending(valid=~outcome.cap, terminal=goal | out_of_range, reward=reward, **step)
 
 
 def count(state: LearnerState, outcome: env.TrialStatus, out: jax.Array, gate: jax.Array, cfg: Config) -> Stats:

@@ -159,6 +159,39 @@ def _verdict(key: str, text: str, first: str, second: str | None, side: str, eff
     return {**verdict, "difference_cm": ci, "holds": stats.above(ci, 0.0) if side == "above" else stats.below(ci, 0.0)}
 
 
+def _per_learner(
+    trials: dict,
+    learners: list[tuple[str, int]],
+    name: str,
+    starts: np.ndarray,
+    block: int,
+    field: ConditionConfig,
+    size: int,
+) -> dict:
+    """{seed: windows and curves} of each learner of protocol `name`, from its rows of the run's per-trial log.
+
+    Args:
+      trials: the run's per-trial log (`run_dir.read_trials`).
+      learners: (condition or protocol, seed) per learner (`batch.learner_table`).
+      name: the protocol.
+      starts: its `block_starts`.
+      block: index of its field block.
+      field: the field whose push sets each trial's sign.
+      size: trials per window and per bin.
+    """
+    found = {}
+    for i, (learner_name, seed) in enumerate(learners):
+        if learner_name == name:
+            mine = {k: v[trials["learner"] == i] for k, v in trials.items()}
+            found[seed] = {
+                "learner": i,
+                "seed": seed,
+                "windows": windows(mine, starts, block, field, size),
+                "curves": curves(mine, starts, field, size),
+            }
+    return found
+
+
 def analyse(trials: dict | None, learners: list[tuple[str, int]], cfg: Config) -> dict | None:
     """The adaptation results of a run, JSON-ready: per-network windows and curves, and the pattern's verdicts.
 
@@ -174,20 +207,6 @@ def analyse(trials: dict | None, learners: list[tuple[str, int]], cfg: Config) -
     if trials is None or not cfg.train.protocols:
         return None
     size, level = cfg.eval.adaptation_window, cfg.claims.level
-
-    def per_learner(name: str, starts: np.ndarray, block: int, field: ConditionConfig) -> dict:
-        found = {}
-        for i, (learner_name, seed) in enumerate(learners):
-            if learner_name == name:
-                mine = {k: v[trials["learner"] == i] for k, v in trials.items()}
-                found[seed] = {
-                    "learner": i,
-                    "seed": seed,
-                    "windows": windows(mine, starts, block, field, size),
-                    "curves": curves(mine, starts, field, size),
-                }
-        return found
-
     protocols = {}
     for name in cfg.train.protocols:
         found = perturbation(cfg, name)
@@ -196,8 +215,8 @@ def analyse(trials: dict | None, learners: list[tuple[str, int]], cfg: Config) -
         block, field = found
         starts = block_starts(cfg, name)
         control = control_of(cfg, name)
-        networks = per_learner(name, starts, block, field)
-        controls = per_learner(control, starts, block, field) if control else {}
+        networks = _per_learner(trials, learners, name, starts, block, field, size)
+        controls = _per_learner(trials, learners, control, starts, block, field, size) if control else {}
         effects = [_effects(n["windows"], controls[s]["windows"] if control else None) for s, n in networks.items()]
         protocols[name] = {
             "blocks": [dataclasses.asdict(b) for b in blocks_of(cfg, name)],

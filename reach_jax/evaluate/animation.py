@@ -11,6 +11,7 @@ Units: positions [m] in the shoulder frame, time [s].
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import jax
@@ -87,6 +88,78 @@ def frame_table(steps: np.ndarray, stride: int) -> list[tuple[int, int]]:
     return frames
 
 
+def _figure(
+    learned: str, tests: tuple[str, ...], title: str, targets: np.ndarray, half: float, cfg: Config
+) -> tuple[Figure, list[tuple]]:
+    """The animation's figure, one panel per test condition, and each panel's (goal, path, links, label) artists.
+
+    Args:
+      learned: the network's learning condition.
+      tests: the test conditions, one panel each, left to right.
+      title: the figure's title.
+      targets: (4, 2) the cycle's targets [m].
+      half: half the goal square's width [m].
+      cfg: the run's config.
+    """
+    fig = Figure(figsize=(4.2 * len(tests), 4.4))
+    axes = fig.subplots(1, len(tests))
+    artists = []
+    for ax, test in zip(axes, tests, strict=True):
+        paper_figures.draw_field(ax, cfg, targets)
+        goal = Rectangle((0, 0), 2 * half, 2 * half, facecolor="none", edgecolor="tab:green", lw=1.5, zorder=2)
+        ax.add_patch(goal)
+        (path,) = ax.plot([], [], color=figures.condition_color(test, cfg), lw=1.2, zorder=3)
+        (links,) = ax.plot([], [], "-o", color="0.25", lw=3, ms=4, zorder=4)
+        label = ax.text(0.02, 0.02, "", transform=ax.transAxes, fontsize=9)
+        ax.set_title(f"learning: {learned} → test: {test}", fontsize=10)
+        ax.set_aspect("equal")
+        ax.set_xlim(-0.3, 0.3)
+        ax.set_ylim(-0.05, 0.55)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        artists.append((goal, path, links, label))
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig, artists
+
+
+def _draw_frame(
+    i: int,
+    frames: list[tuple[int, int]],
+    artists: list[tuple],
+    ep: episodes.Episode,
+    traj: episodes.Trajectory,
+    targets: np.ndarray,
+    half: float,
+    cfg: Config,
+) -> list:
+    """Frame i of `frame_table`'s frames: each panel's goal, path so far, arm and clock; returns the changed artists.
+
+    Args:
+      i: the frame's index.
+      frames: `frame_table`'s (movement, step) per frame.
+      artists: `_figure`'s artists per panel.
+      ep: the cycle's Episode, leading axes (tests, 4).
+      traj: its Trajectory, leading axes (tests, 4).
+      targets: (4, 2) the cycle's targets [m].
+      half: half the goal square's width [m].
+      cfg: the run's config.
+    """
+    m, k = frames[i]
+    changed = []
+    for c, (goal, path, links, label) in enumerate(artists):
+        end = int(ep.steps[c, m])
+        j = min(k, end)
+        goal.set_xy(targets[m] - half)
+        path.set_data(ep.hand[c, m, : j + 1, 0], ep.hand[c, m, : j + 1, 1])
+        pts = arm_points(traj.arm[c, m, j, :2], cfg)
+        links.set_data(pts[:, 0], pts[:, 1])
+        status = OUTCOME_NAMES[int(ep.outcome[c, m])] if k >= end else ""
+        label.set_text(f"{j * cfg.arm.dt:.2f} s {status}")
+        changed += [goal, path, links, label]
+    return changed
+
+
 def animate(
     run_dir: Path,
     out: Path | None = None,
@@ -112,49 +185,16 @@ def animate(
     cfg = run.cfg
     network = pick_network(run, learned, tests[0]) if network is None else network
     ep, traj = (jax.tree.map(lambda a: a[0], x) for x in movements(run, [network], tests))
-    starts, targets = cycle_pairs(cfg)
+    _, targets = cycle_pairs(cfg)
     frames = frame_table(ep.steps, stride)
     learned, seed = run.learners[network]
     wins = (ep.outcome == SUCCESS).sum(axis=1)
-
-    fig = Figure(figsize=(4.2 * len(tests), 4.4))
-    axes = fig.subplots(1, len(tests))
-    artists = []
+    title = f"{Path(run_dir).name}, network seed {seed}: {wins[0]} and {wins[1]} of {len(targets)} reached"
     half = task.goal_half_width(cfg)
-    for ax, test in zip(axes, tests, strict=True):
-        paper_figures.draw_field(ax, cfg, targets)
-        goal = Rectangle((0, 0), 2 * half, 2 * half, facecolor="none", edgecolor="tab:green", lw=1.5, zorder=2)
-        ax.add_patch(goal)
-        (path,) = ax.plot([], [], color=figures.condition_color(test, cfg), lw=1.2, zorder=3)
-        (links,) = ax.plot([], [], "-o", color="0.25", lw=3, ms=4, zorder=4)
-        label = ax.text(0.02, 0.02, "", transform=ax.transAxes, fontsize=9)
-        ax.set_title(f"learning: {learned} → test: {test}", fontsize=10)
-        ax.set_aspect("equal")
-        ax.set_xlim(-0.3, 0.3)
-        ax.set_ylim(-0.05, 0.55)
-        ax.set_xticks([])
-        ax.set_yticks([])
-        artists.append((goal, path, links, label))
-    fig.suptitle(
-        f"{Path(run_dir).name}, network seed {seed}: {wins[0]} and {wins[1]} of {len(targets)} reached", fontsize=10
+    fig, artists = _figure(learned, tests, title, targets, half, cfg)
+    draw = functools.partial(
+        _draw_frame, frames=frames, artists=artists, ep=ep, traj=traj, targets=targets, half=half, cfg=cfg
     )
-    fig.tight_layout()
-
-    def draw(i: int):
-        m, k = frames[i]
-        changed = []
-        for c, (goal, path, links, label) in enumerate(artists):
-            end = int(ep.steps[c, m])
-            j = min(k, end)
-            goal.set_xy(targets[m] - half)
-            path.set_data(ep.hand[c, m, : j + 1, 0], ep.hand[c, m, : j + 1, 1])
-            pts = arm_points(traj.arm[c, m, j, :2], cfg)
-            links.set_data(pts[:, 0], pts[:, 1])
-            status = OUTCOME_NAMES[int(ep.outcome[c, m])] if k >= end else ""
-            label.set_text(f"{j * cfg.arm.dt:.2f} s {status}")
-            changed += [goal, path, links, label]
-        return changed
-
     movie = FuncAnimation(fig, draw, frames=len(frames), blit=False)
     out = Path(run_dir) / "eval" / GIF_NAME if out is None else Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

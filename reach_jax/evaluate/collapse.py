@@ -8,6 +8,8 @@ from the metrics instead (`train.health`). Units: success as a fraction of a net
 
 from __future__ import annotations
 
+from reach_jax.config import Config
+
 
 def home_test(learning: str, tests: tuple[str, ...]) -> str:
     """The test condition that a network learned in `learning` is judged in: its own where tested, else tests[0]."""
@@ -29,6 +31,18 @@ def collapsed_networks(per_network: list[dict], pairs: int, tests: tuple[str, ..
         for r in per_network
         if r["test"] == home_test(r["learning"], tests) and r["success"] < threshold * pairs
     ]
+
+
+def of_table(table: dict, cfg: Config, recipe: int | None = None) -> list[dict]:
+    """The collapsed networks of a `lattice.table2` record under cfg's criteria, of one recipe or of all of them."""
+    rows = [r for r in table["per_network"] if recipe is None or r["recipe"] == recipe]
+    tests, rate = cfg.eval.test_conditions, cfg.claims.collapse_success
+    return collapsed_networks(rows, table["pairs_per_network"], tests, rate)
+
+
+def with_collapsed(claim: dict, collapsed: list[dict]) -> dict:
+    """A claim's record with the collapsed networks (`collapsed_networks`) of the learning conditions it reads."""
+    return {**claim, "collapsed": [n for n in collapsed if n["learning"] in claim["learnings"]]}
 
 
 def names(networks: list[dict]) -> str:

@@ -79,8 +79,7 @@ def collapsed_of(run_dir: Path, claims: dict) -> list[dict] | None:
         return None
     cfg = run_dir_io.read_config(run_dir) if run_dir_io.holds_run(run_dir) else Config()
     table = json.loads((run_dir / "eval" / "table2.json").read_text())
-    tests, rate = cfg.eval.test_conditions, cfg.claims.collapse_success
-    return collapse.collapsed_networks(table["per_network"], table["pairs_per_network"], tests, rate)
+    return collapse.of_table(table, cfg)
 
 
 def markdown(rows: list[dict]) -> str:

@@ -122,6 +122,78 @@ def _ellipse(matrix: np.ndarray, n: int = 73) -> np.ndarray:
     return np.stack([np.cos(phi), np.sin(phi)], axis=1) @ np.asarray(matrix).T
 
 
+def _gain_ellipses(ax, rows: list[dict], key: str, conditions: list[str], cfg: Config) -> None:
+    """Per condition, each network's median gain ellipse thin and the element-wise median over its networks thick.
+
+    Args:
+      rows: `impedance.summarize`'s per-network rows of one test condition.
+      key: the gain, "stiffness_N_per_m" or "damping_Ns_per_m".
+      conditions: the learning conditions, in the legend's order.
+      cfg: model config.
+    """
+    for cond in conditions:
+        mats = [np.asarray(r[key]["median"]) for r in rows if r["learning"] == cond]
+        for m in mats:
+            e = _ellipse(m)
+            ax.plot(e[:, 0], e[:, 1], color=condition_color(cond, cfg), lw=0.5, alpha=0.5)
+        if mats:
+            e = _ellipse(np.median(mats, axis=0))
+            ax.plot(e[:, 0], e[:, 1], color=condition_color(cond, cfg), lw=2.2, label=cond)
+
+
+def _damping_references(ax, passive: np.ndarray, axes_info: list[dict]) -> None:
+    """The passive arm's damping ellipse, dashed, and the field's axes dotted across the panel's extent so far.
+
+    Args:
+      passive: (2, 2) the passive arm's damping [N s/m].
+      axes_info: `impedance.summarize`'s "field_axes": name, direction [deg] and eigenvalue [N s/m] of each.
+    """
+    e = _ellipse(passive)
+    ax.plot(e[:, 0], e[:, 1], color="0.4", lw=1.5, ls="--", label="passive arm")
+    lim = max(np.abs(ax.get_xlim()).max(), np.abs(ax.get_ylim()).max())
+    for info, color in zip(axes_info, ("tab:red", "tab:cyan"), strict=True):
+        a = np.radians(info["direction_deg"])
+        ax.plot(
+            [-lim * np.cos(a), lim * np.cos(a)],
+            [-lim * np.sin(a), lim * np.sin(a)],
+            color=color,
+            lw=0.8,
+            ls=":",
+            label=f"field {info['name']} axis ({info['eigenvalue_Ns_per_m']:+.1f})",
+        )
+
+
+def _axis_damping(ax, rows: list[dict], conditions: list[str], unstable: float, test: str, cfg: Config) -> None:
+    """Each network's median damping along the field's unstable and stable axes, one column per condition.
+
+    Args:
+      rows: `impedance.summarize`'s per-network rows of test condition `test`.
+      conditions: the learning conditions, left to right.
+      unstable: the field's unstable eigenvalue [N s/m].
+      test: the test condition.
+      cfg: model config.
+    """
+    for k, cond in enumerate(conditions):
+        for j, (name, marker) in enumerate((("unstable", "o"), ("stable", "s"))):
+            vals = [r[f"damping_{name}"]["median"] for r in rows if r["learning"] == cond]
+            x = k + (j - 0.5) * 0.3 + np.linspace(-0.06, 0.06, max(len(vals), 1))[: len(vals)]
+            ax.scatter(
+                x,
+                vals,
+                marker=marker,
+                s=18,
+                color=condition_color(cond, cfg),
+                facecolors="none" if name == "stable" else None,
+                label=f"{name} axis" if k == 0 else None,
+            )
+    ax.axhline(unstable, color="tab:red", lw=0.8, ls=":", label="field's unstable eigenvalue")
+    ax.axhline(0, color="0.6", lw=0.5)
+    ax.set_xticks(range(len(conditions)), conditions, fontsize=8)
+    ax.set_ylabel("learned damping along the axis [N s/m]")
+    ax.set_title(f"test: {test} — damping along the field's axes (per network)", fontsize=10)
+    ax.legend(fontsize=7)
+
+
 def impedance(summary: dict, gains: dict, learners, cfg: Config):
     """Learned hand stiffness and damping ellipses per learning condition, and the damping along the field's axes.
 
@@ -148,58 +220,18 @@ def impedance(summary: dict, gains: dict, learners, cfg: Config):
             (("stiffness_N_per_m", "stiffness [N/m]"), ("damping_Ns_per_m", "damping [N s/m]"))
         ):
             ax = axes[row, col]
-            for cond in conditions:
-                mats = [np.asarray(r[key]["median"]) for r in rows if r["learning"] == cond]
-                for m in mats:
-                    e = _ellipse(m)
-                    ax.plot(e[:, 0], e[:, 1], color=condition_color(cond, cfg), lw=0.5, alpha=0.5)
-                if mats:
-                    e = _ellipse(np.median(mats, axis=0))
-                    ax.plot(e[:, 0], e[:, 1], color=condition_color(cond, cfg), lw=2.2, label=cond)
+            _gain_ellipses(ax, rows, key, conditions, cfg)
             if col == 1:
                 valid = gains["valid"][:, row]
                 passive = np.median(gains["passive"][:, row][valid], axis=0) if valid.any() else np.zeros((2, 2))
-                e = _ellipse(passive)
-                ax.plot(e[:, 0], e[:, 1], color="0.4", lw=1.5, ls="--", label="passive arm")
-                lim = max(np.abs(ax.get_xlim()).max(), np.abs(ax.get_ylim()).max())
-                for info, color in zip(axes_info, ("tab:red", "tab:cyan"), strict=True):
-                    a = np.radians(info["direction_deg"])
-                    ax.plot(
-                        [-lim * np.cos(a), lim * np.cos(a)],
-                        [-lim * np.sin(a), lim * np.sin(a)],
-                        color=color,
-                        lw=0.8,
-                        ls=":",
-                        label=f"field {info['name']} axis ({info['eigenvalue_Ns_per_m']:+.1f})",
-                    )
+                _damping_references(ax, passive, axes_info)
             ax.axhline(0, color="0.8", lw=0.5)
             ax.axvline(0, color="0.8", lw=0.5)
             ax.set_aspect("equal", adjustable="datalim")
             ax.set_title(f"test: {test} — {label}", fontsize=10)
             ax.set_xlabel(f"x component [{label.split('[')[1]}")
             ax.legend(fontsize=7, loc="upper right")
-        ax = axes[row, 2]
-        for k, cond in enumerate(conditions):
-            for j, (name, marker) in enumerate((("unstable", "o"), ("stable", "s"))):
-                vals = [r[f"damping_{name}"]["median"] for r in rows if r["learning"] == cond]
-                x = k + (j - 0.5) * 0.3 + np.linspace(-0.06, 0.06, max(len(vals), 1))[: len(vals)]
-                ax.scatter(
-                    x,
-                    vals,
-                    marker=marker,
-                    s=18,
-                    color=condition_color(cond, cfg),
-                    facecolors="none" if name == "stable" else None,
-                    label=f"{name} axis" if k == 0 else None,
-                )
-        ax.axhline(
-            axes_info[0]["eigenvalue_Ns_per_m"], color="tab:red", lw=0.8, ls=":", label="field's unstable eigenvalue"
-        )
-        ax.axhline(0, color="0.6", lw=0.5)
-        ax.set_xticks(range(len(conditions)), conditions, fontsize=8)
-        ax.set_ylabel("learned damping along the axis [N s/m]")
-        ax.set_title(f"test: {test} — damping along the field's axes (per network)", fontsize=10)
-        ax.legend(fontsize=7)
+        _axis_damping(axes[row, 2], rows, conditions, axes_info[0]["eigenvalue_Ns_per_m"], test, cfg)
     fig.suptitle("Learned hand impedance at the states of each network's own test movements")
     fig.tight_layout()
     return fig

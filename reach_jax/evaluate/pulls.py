@@ -57,6 +57,81 @@ def line_deviation(path: np.ndarray, starts: np.ndarray, targets: np.ndarray) ->
     return side[np.arange(len(side)), k]
 
 
+def _measures(paths: dict, starts: np.ndarray, targets: np.ndarray, field: np.ndarray) -> dict[str, np.ndarray]:
+    """Each movement's pulls in (b) and (c), the field's force, the angles between them and the line deviations.
+
+    Args:
+      paths: {"a"|"b"|"c"|"d": (M, T, 2) hand paths [m]} of one network per learning condition.
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
+      field: (2, 2) viscous field matrix of the test condition [N s/m].
+
+    Returns:
+      pull_b, pull_c: (M, 2) [m]; force: (M, 2), along the field's force; angle (between the pulls), b_to_force,
+      c_to_force: (M,) [deg]; dev_b, dev_c: (M,) [m].
+    """
+    pull_b = pull_vectors(paths["b"], paths["a"])
+    pull_c = pull_vectors(paths["c"], paths["d"])
+    force = (targets - starts) @ np.asarray(field).T
+    return {
+        "pull_b": pull_b,
+        "pull_c": pull_c,
+        "angle": _angle_between(pull_b, pull_c),
+        "force": force,
+        "b_to_force": _angle_between(pull_b, force),
+        "c_to_force": _angle_between(pull_c, force),
+        "dev_b": line_deviation(paths["b"], starts, targets),
+        "dev_c": line_deviation(paths["c"], starts, targets),
+    }
+
+
+def _movement_rows(m: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np.ndarray) -> list[dict]:
+    """aftereffect.json's "movements": each movement's start, target and corner with its `_measures` m.
+
+    Args:
+      m: `_measures` of the M movements.
+      starts: (M, 2) [m].
+      targets: (M, 2) [m].
+      start_corner: (M,) index into CORNER_NAMES.
+    """
+    return [
+        {
+            "start_m": [float(v) for v in starts[i]],
+            "target_m": [float(v) for v in targets[i]],
+            "start_corner": CORNER_NAMES[int(start_corner[i])],
+            "pull_b_deg": _json_float(_deg(m["pull_b"][i])),
+            "pull_b_m": float(np.linalg.norm(m["pull_b"][i])),
+            "pull_c_deg": _json_float(_deg(m["pull_c"][i])),
+            "pull_c_m": float(np.linalg.norm(m["pull_c"][i])),
+            "angle_deg": _json_float(m["angle"][i]),
+            "field_force_deg": _json_float(_deg(m["force"][i])),
+            "pull_b_to_force_deg": _json_float(m["b_to_force"][i]),
+            "pull_c_to_force_deg": _json_float(m["c_to_force"][i]),
+            "line_deviation_b_m": float(m["dev_b"][i]),
+            "line_deviation_c_m": float(m["dev_c"][i]),
+        }
+        for i in range(len(starts))
+    ]
+
+
+def _summary(m: dict) -> dict:
+    """The measures over all movements of `_measures` m: mean angles and directions, fractions with the force."""
+    finite = m["angle"][np.isfinite(m["angle"])]
+    unit_b, unit_c = trial_log.unit(m["pull_b"]), trial_log.unit(m["pull_c"])
+    return {
+        "mean_angle_deg": _json_float(finite.mean()) if len(finite) else None,
+        "mean_direction_deg": {"b": _circular_mean_deg(m["pull_b"]), "c": _circular_mean_deg(m["pull_c"])},
+        "angle_between_mean_directions_deg": _json_float(
+            _angle_between(np.nanmean(unit_b, axis=0), np.nanmean(unit_c, axis=0))
+        ),
+        "fraction_opposite_line_deviation": float((np.sign(m["dev_b"]) * np.sign(m["dev_c"]) < 0).mean()),
+        "mean_pull_b_to_force_deg": _json_float(np.nanmean(m["b_to_force"])),
+        "mean_pull_c_to_force_deg": _json_float(np.nanmean(m["c_to_force"])),
+        "fraction_b_with_force": float(np.mean(m["b_to_force"] < 90.0)),
+        "fraction_c_against_force": float(np.mean(m["c_to_force"] > 90.0)),
+    }
+
+
 def aftereffect(
     paths: dict, starts: np.ndarray, targets: np.ndarray, start_corner: np.ndarray, field: np.ndarray
 ) -> dict:
@@ -85,47 +160,8 @@ def aftereffect(
     Returns:
       JSON-ready dict.
     """
-    pull_b = pull_vectors(paths["b"], paths["a"])
-    pull_c = pull_vectors(paths["c"], paths["d"])
-    angle = _angle_between(pull_b, pull_c)
-    force = (targets - starts) @ np.asarray(field).T
-    b_to_force, c_to_force = _angle_between(pull_b, force), _angle_between(pull_c, force)
-    dev_b = line_deviation(paths["b"], starts, targets)
-    dev_c = line_deviation(paths["c"], starts, targets)
-    movements = []
-    for i in range(len(starts)):
-        movements.append(
-            {
-                "start_m": [float(v) for v in starts[i]],
-                "target_m": [float(v) for v in targets[i]],
-                "start_corner": CORNER_NAMES[int(start_corner[i])],
-                "pull_b_deg": _json_float(_deg(pull_b[i])),
-                "pull_b_m": float(np.linalg.norm(pull_b[i])),
-                "pull_c_deg": _json_float(_deg(pull_c[i])),
-                "pull_c_m": float(np.linalg.norm(pull_c[i])),
-                "angle_deg": _json_float(angle[i]),
-                "field_force_deg": _json_float(_deg(force[i])),
-                "pull_b_to_force_deg": _json_float(b_to_force[i]),
-                "pull_c_to_force_deg": _json_float(c_to_force[i]),
-                "line_deviation_b_m": float(dev_b[i]),
-                "line_deviation_c_m": float(dev_c[i]),
-            }
-        )
-    finite = angle[np.isfinite(angle)]
-    opposite = np.sign(dev_b) * np.sign(dev_c) < 0
-    return {
-        "movements": movements,
-        "mean_angle_deg": _json_float(finite.mean()) if len(finite) else None,
-        "mean_direction_deg": {"b": _circular_mean_deg(pull_b), "c": _circular_mean_deg(pull_c)},
-        "angle_between_mean_directions_deg": _json_float(
-            _angle_between(np.nanmean(trial_log.unit(pull_b), axis=0), np.nanmean(trial_log.unit(pull_c), axis=0))
-        ),
-        "fraction_opposite_line_deviation": float(opposite.mean()),
-        "mean_pull_b_to_force_deg": _json_float(np.nanmean(b_to_force)),
-        "mean_pull_c_to_force_deg": _json_float(np.nanmean(c_to_force)),
-        "fraction_b_with_force": float(np.mean(b_to_force < 90.0)),
-        "fraction_c_against_force": float(np.mean(c_to_force > 90.0)),
-    }
+    measures = _measures(paths, starts, targets, field)
+    return {"movements": _movement_rows(measures, starts, targets, start_corner), **_summary(measures)}
 
 
 def pool_aftereffect(per_seed: list[dict], level: float) -> dict:

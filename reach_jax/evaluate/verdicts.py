@@ -57,17 +57,16 @@ def decide(
         rows = [r for r in table["per_network"] if r["recipe"] == k]
         cells = claims.Cells(rows, table["pairs_per_network"])
         after_k = pulls.pool_aftereffect([a for a in per_seed if a["recipe"] == k], level)
-        tests, rate = cfg.eval.test_conditions, cfg.claims.collapse_success
-        collapsed = collapse.collapsed_networks(rows, table["pairs_per_network"], tests, rate)
+        collapsed = collapse.of_table(table, cfg, recipe=k)
         verdicts.append(
             {
                 "hypers": hypers,
                 "level": level,
                 "informative_networks": cfg.claims.informative_networks,
                 "networks_per_condition": cfg.train.seeds,
-                "claims": [with_collapsed(c, collapsed) for c in claims.recipe_claims(cells, after_k, cfg)],
+                "claims": [collapse.with_collapsed(c, collapsed) for c in claims.recipe_claims(cells, after_k, cfg)],
                 "collapsed": collapsed,
-                "collapse_success": rate,
+                "collapse_success": cfg.claims.collapse_success,
                 "aftereffect": after_k,
                 "cells": claims.table_cells(cells, cfg.claims),
                 "impedance": impedance_cells(imp, nets, level),
@@ -75,11 +74,6 @@ def decide(
             }
         )
     return verdicts
-
-
-def with_collapsed(claim: dict, collapsed: list[dict]) -> dict:
-    """A claim's record with the collapsed networks (`collapse.collapsed_networks`) of the conditions it reads."""
-    return {**claim, "collapsed": [n for n in collapsed if n["learning"] in claim["learnings"]]}
 
 
 def curriculum_stability(metrics: list[dict], learners: list[int], trials: int, cfg: Config) -> dict:

@@ -87,6 +87,14 @@ def build_train_parser() -> argparse.ArgumentParser:
     """The command-line interface of `python -m reach_jax.train`: the core flags, then the infrastructure ones."""
     p = Parser(prog="python -m reach_jax.train", description=train.__doc__.splitlines()[0], add_help=False)
     core = p.add_argument_group("core")
+    _add_core_arguments(core)
+    _add_hyper_arguments(core)
+    _add_infrastructure_arguments(p.add_argument_group("infrastructure", "devices, chunking and logging, multi-host"))
+    return p
+
+
+def _add_core_arguments(core) -> None:
+    """What to train and where: the config, the batch's shape, the seed and the run directory."""
     core.add_argument("-h", "--help", action="help", help="show this help and exit")
     core.add_argument("--config", type=Path, metavar="FILE", help="start from this config (JSON, as in config.json)")
     core.add_argument("--trials", type=positive_int, help="trials per learner (2e6 in the paper)")
@@ -118,6 +126,10 @@ def build_train_parser() -> argparse.ArgumentParser:
         "(after --config, before the other flags); learner.NAME=V of a hyperparameter is --sweep NAME=V",
     )
     core.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _add_hyper_arguments(core) -> None:
+    """The hyperparameters: the paper's three by name, any other by --sweep, and their table."""
     for name in PAPER_HYPER:
         h = hyper.BY_NAME[name]
         core.add_argument(
@@ -137,7 +149,9 @@ def build_train_parser() -> argparse.ArgumentParser:
     )
     core.add_argument("--list-hyper", action=_ListHyper, help="print the hyperparameters (name, default, range, help)")
 
-    infra = p.add_argument_group("infrastructure", "devices, chunking and logging, multi-host")
+
+def _add_infrastructure_arguments(infra) -> None:
+    """How the run is carried out, none of which changes its results: devices, chunks, logs, several processes."""
     infra.add_argument(
         "--devices",
         type=positive_int,
@@ -181,4 +195,3 @@ def build_train_parser() -> argparse.ArgumentParser:
         "JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES and JAX_PROCESS_ID, else from the cluster (SLURM, Open MPI); "
         "process 0 writes the run directory, which --resume needs on a shared file system",
     )
-    return p

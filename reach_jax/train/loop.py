@@ -93,6 +93,17 @@ def chunks(prep: Prepared, group: batch.Batch, devices=None, stop: interrupt.Sto
         raise interrupt.Interrupted(asked, prep.run_dir, index)
 
 
+def _sinks(prep: Prepared, group, table, progress: bool, devices, stream) -> list[Sink]:
+    """The writing process's sinks: the metrics, the checkpoints and, with `progress`, the bar (`run`'s Args)."""
+    sinks: list[Sink] = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
+    if progress:
+        n_devices = len(devices if devices is not None else jax.devices())
+        seen = run_dir_io.read_metrics(prep.run_dir, prep.chunk) if prep.chunk else []
+        health = from_rows(seen, prep.cfg, table)  # a resumed run's learners as they stood
+        sinks.append(ProgressSink(prep.cfg.train.trials, health, n_devices, stream))
+    return sinks
+
+
 def run(
     cfg: Config | Prepared,
     run_dir: Path | None = None,
@@ -128,16 +139,8 @@ def run(
     prep = cfg if isinstance(cfg, Prepared) else prepare(cfg, run_dir, resume=resume, speed=speed)
     writer = jax.process_index() == 0  # one writer when several processes share the run directory
     with run_lock.hold(prep.run_dir) if writer else contextlib.nullcontext(), interrupt.catch() as stop:
-        group = begin(prep)
-        table = batch.learner_table(prep.cfg.train)
-        sinks: list[Sink] = []
-        if writer:
-            sinks = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
-            if progress:
-                n_devices = len(devices if devices is not None else jax.devices())
-                seen = run_dir_io.read_metrics(prep.run_dir, prep.chunk) if prep.chunk else []
-                health = from_rows(seen, prep.cfg, table)  # a resumed run's learners as they stood
-                sinks.append(ProgressSink(prep.cfg.train.trials, health, n_devices, stream))
+        group, table = begin(prep), batch.learner_table(prep.cfg.train)
+        sinks = _sinks(prep, group, table, progress, devices, stream) if writer else []
         started = time.monotonic()
         try:
             for done in chunks(prep, group, devices, stop):

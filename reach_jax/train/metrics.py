@@ -54,17 +54,7 @@ def metrics_rows(states: learner_state.LearnerState, hypers: hyper.Hyper, table,
     bound = np.asarray(exploration.schedule(hypers, states.env.trials, cur.full_at))
     mechanism = learner_state.mechanism_columns(states, cfg)
     rows = []
-
-    def measure(x):
-        return float32_value(x) if isinstance(x, np.float32) else x
-
     for i, ((cond, seed), values) in enumerate(zip(table, hyper_values(hypers), strict=True)):
-        ended = int(s.trials[i])
-
-        def per(counter, i=i, ended=ended):
-            return float(counter[i]) / ended if ended else None
-
-        mean_steps = per(s.trial_steps)
         rows.append(
             {
                 "chunk": chunk,
@@ -74,22 +64,50 @@ def metrics_rows(states: learner_state.LearnerState, hypers: hyper.Hyper, table,
                 **values,
                 "trials": int(trials[i]),
                 "steps": int(steps[i]),
-                "chunk_trials": ended,
-                "success_rate": per(s.goals),
-                "out_rate": per(s.outs),
-                "cap_rate": per(s.caps),
-                "drift_rate": per(s.drifted),
-                "mean_trial_steps": mean_steps,
-                "mean_trial_s": None if mean_steps is None else mean_steps * cfg.arm.dt,
+                **_chunk_rates(s, i, cfg.arm.dt),
                 "distance_m": float32_value(distance[i]),
                 "n_max": float32_value(n_max[i]),
                 "exploration": float32_value(bound[i]),
                 "block": int(block[i]),
-                **{name: measure(column[i]) for name, column in mechanism.items()},
+                **{name: _measure(column[i]) for name, column in mechanism.items()},
                 "wall_s": round(wall, 3),
             }
         )
     return rows
+
+
+def _chunk_rates(stats, i: int, dt: float) -> dict:
+    """Learner i's trials ended in the chunk, the shares of them that met each outcome and their mean length.
+
+    Args:
+      stats: the chunk's counters (`learner_state.Stats`), learner axis first (host arrays).
+      i: the learner.
+      dt: the step [s].
+
+    Returns:
+      chunk_trials, then success, out, cap and drift rates, mean_trial_steps and mean_trial_s: None where no trial
+      ended.
+    """
+    ended = int(stats.trials[i])
+
+    def per(counter):
+        return float(counter[i]) / ended if ended else None
+
+    mean_steps = per(stats.trial_steps)
+    return {
+        "chunk_trials": ended,
+        "success_rate": per(stats.goals),
+        "out_rate": per(stats.outs),
+        "cap_rate": per(stats.caps),
+        "drift_rate": per(stats.drifted),
+        "mean_trial_steps": mean_steps,
+        "mean_trial_s": None if mean_steps is None else mean_steps * dt,
+    }
+
+
+def _measure(x):
+    """A float32 measure as its shortest decimal (`float32_value`); any other value as it is."""
+    return float32_value(x) if isinstance(x, np.float32) else x
 
 
 def status_line(rows: list[dict]) -> str:
