@@ -22,9 +22,8 @@ from reach_jax.config.tables import (
     ProtocolConfig,
 )
 
-CONFIG_VERSION = (
-    12  # a stored config holds every field; 3-8 and 11 added fields, 9-10 and 12 changed defaults (`compat`)
-)
+# A stored config holds every field; versions 3-8 and 11 added fields, 9-10 and 12 changed defaults (`compat`).
+CONFIG_VERSION = 12
 
 
 @dataclass(frozen=True)
