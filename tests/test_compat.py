@@ -92,7 +92,6 @@ def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_
     with its actor targets clipped the default; a version-1 config without those fields trained the old recipe."""
     old, pick, before_12 = compat.CHANGED_DEFAULTS[9], compat.CHANGED_DEFAULTS[10], compat.CHANGED_DEFAULTS[12]
     assert old.keys() == pick.keys() == before_12.keys() and all(old[s].keys() == pick[s].keys() for s in old)
-    assert before_12 == {**old, "learner": {**old["learner"], "actor_target_bound": 0.0}}
     stored = {**to_dict(Config()), "version": 1}
     for section, fields in before_12.items():
         for name in fields:

@@ -33,6 +33,22 @@ ADDED_CONFIG_FIELDS = {
     },
 }
 
+# The constant-exploration recipe (versions 1-8 and 10-11) in the fields that versions 9 and 12 changed.
+_CONSTANT_EXPLORATION = {
+    "learner": {
+        "lr": 1.0,
+        "noise": 0.2,
+        "lam": 0.999,
+        "noise_final_ratio": 1.0,
+        "noise_anneal_delay": 0,
+        "noise_value_ratio": 1.0,
+        "noise_corr": 0.0,
+        "actor_signal_gain": 1.0,
+        "drift_gate": 0.0,
+    },
+    "task": {"max_trial_time": 10.0},
+}
+
 # Defaults changed with a config version, at their values before it: a version-1 config, which left out the
 # fields added during its life, trained with these where it lacks them. Version 9 made round 4's held-out pick the
 # default recipe; version 10 put the recipe of version 8 back, since the pick collapsed learners in both runs of the
@@ -40,20 +56,7 @@ ADDED_CONFIG_FIELDS = {
 # issue 49's adoption rule (no collapse on held-out seeds, studies/collapse/verdict.md). The pick without the clip is
 # `recipes/round4_pick.json`; the recipe of versions 10-11 is `recipes/constant_exploration.json`.
 CHANGED_DEFAULTS = {
-    9: {
-        "learner": {
-            "lr": 1.0,
-            "noise": 0.2,
-            "lam": 0.999,
-            "noise_final_ratio": 1.0,
-            "noise_anneal_delay": 0,
-            "noise_value_ratio": 1.0,
-            "noise_corr": 0.0,
-            "actor_signal_gain": 1.0,
-            "drift_gate": 0.0,
-        },
-        "task": {"max_trial_time": 10.0},
-    },
+    9: _CONSTANT_EXPLORATION,
     10: {
         "learner": {
             "lr": 1.6,
@@ -68,21 +71,7 @@ CHANGED_DEFAULTS = {
         },
         "task": {"max_trial_time": 4.0},
     },
-    12: {
-        "learner": {
-            "lr": 1.0,
-            "noise": 0.2,
-            "lam": 0.999,
-            "noise_final_ratio": 1.0,
-            "noise_anneal_delay": 0,
-            "noise_value_ratio": 1.0,
-            "noise_corr": 0.0,
-            "actor_signal_gain": 1.0,
-            "actor_target_bound": 0.0,
-            "drift_gate": 0.0,
-        },
-        "task": {"max_trial_time": 10.0},
-    },
+    12: {**_CONSTANT_EXPLORATION, "learner": {**_CONSTANT_EXPLORATION["learner"], "actor_target_bound": 0.0}},
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change
