@@ -62,7 +62,8 @@ def compare(a: Path, b: Path) -> list[str]:
         with np.load(a / "checkpoints" / name) as x, np.load(b / "checkpoints" / name) as y:
             keys = set(x.files) - {"__meta__"}
             if keys != set(y.files) - {"__meta__"}:
-                diffs.append(f"{name}: different leaves")
+                only = sorted(keys ^ (set(y.files) - {"__meta__"}))
+                diffs.append(f"{name}: leaves in one run only: {', '.join(only)}")
             for k in sorted(keys & set(y.files)):
                 leaves += 1
                 if not np.array_equal(x[k], y[k], equal_nan=x[k].dtype.kind == "f"):

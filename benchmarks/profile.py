@@ -62,7 +62,7 @@ def parts(cfg):
         x = env.observe(s.env, cfg)
         rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)
         params, out, _, u1 = learner.ts_step(s.agent.params, x, s.agent.pending, s.agent.n_max, 1.0, cfg, rows)
-        pending = s.agent.pending._replace(x=x, out=out, u1=u1, rows=rows)
+        pending = s.agent.pending._replace(x=x, out=out, u1=u1)
         return s.replace(agent=s.agent.replace(params=params, pending=pending))
 
     def arm_step(s, u):
@@ -107,8 +107,8 @@ def time_part(part, n_learners: int, n_steps: int, cfg) -> float:
     step = jax.vmap(one)
 
     def run(states, plans, hypers):
-        def body(carry, u):
-            return (step(carry[0], u, plans, hypers), None), None
+        def body(states, u):
+            return step(states, u, plans, hypers), None
 
         return chunk.scan_steps(body, states, n_steps, cfg, batched=True)[0]
 

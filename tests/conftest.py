@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from reach_jax.config import hyper
-from reach_jax.engine import distribute
+from reach_jax.engine import xla_options
 from reach_jax.store import checkpoint
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import cli
@@ -122,7 +122,7 @@ def load_tool():
 def pytest_configure(config):
     """Give the test process (and the subprocesses it starts, which inherit XLA_FLAGS) the CLIs' backend flags, and
     one compilation cache."""
-    distribute.add_xla_flags()
+    xla_options.add_xla_flags()
     _share_compilations(config)
     # A suite started in the background (`nohup`, `cmd &`) inherits an ignored SIGINT, which the trainer rightly
     # leaves ignored; its tests of Ctrl-C need the terminal's disposition, here and in the processes they start.

@@ -11,7 +11,7 @@ import textwrap
 import jax.numpy as jnp
 import pytest
 
-from reach_jax.engine import distribute
+from reach_jax.engine import xla_options
 
 
 def _child(code: str) -> dict:
@@ -29,18 +29,18 @@ def test_imports_leave_the_environment_and_jax_alone_and_setup_sets_the_flags():
         import json, os, warnings
         import jax
         from reach_jax import agent, config, engine, env, evaluate, physics, store, train
-        from reach_jax.engine import distribute, rollout
+        from reach_jax.engine import distribute, rollout, xla_options
         from reach_jax.evaluate import cli as evaluate_cli, figures
         from reach_jax.train import cli as train_cli
-        after_import = (os.environ.get("XLA_FLAGS"), distribute.jax_started(), jax.config.jax_num_cpu_devices)
+        after_import = (os.environ.get("XLA_FLAGS"), xla_options.jax_started(), jax.config.jax_num_cpu_devices)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            rejected = distribute.add_xla_flags(("--xla_reach_jax_no_such_flag=1",))
+            rejected = xla_options.add_xla_flags(("--xla_reach_jax_no_such_flag=1",))
         after_reject = os.environ.get("XLA_FLAGS")
         distribute.setup_backend(2)
         import jax.numpy as jnp
         total = float(jnp.arange(4.0).sum())
-        started = distribute.jax_started()
+        started = xla_options.jax_started()
         print(json.dumps({
             "after_import": after_import, "rejected": rejected, "after_reject": after_reject,
             "warnings": [str(w.message) for w in caught], "flags": os.environ.get("XLA_FLAGS"),
@@ -51,7 +51,7 @@ def test_imports_leave_the_environment_and_jax_alone_and_setup_sets_the_flags():
     assert got["after_import"] == [None, False, -1]  # asking left the device count alone
     assert got["rejected"] is False and got["after_reject"] is None
     assert len(got["warnings"]) == 1 and "rejects" in got["warnings"][0] and "no_such_flag" in got["warnings"][0]
-    assert got["flags"] == " ".join(distribute.CPU_XLA_FLAGS)
+    assert got["flags"] == " ".join(xla_options.CPU_XLA_FLAGS)
     assert got["devices"] == 2 and got["total"] == 6.0 and got["started"] is True
 
 
@@ -59,5 +59,5 @@ def test_flags_asked_for_after_jax_started_warn_and_change_nothing(monkeypatch):
     jnp.zeros(1).block_until_ready()
     monkeypatch.delenv("XLA_FLAGS", raising=False)
     with pytest.warns(UserWarning, match="JAX already started"):
-        assert distribute.add_xla_flags() is False
+        assert xla_options.add_xla_flags() is False
     assert "XLA_FLAGS" not in os.environ

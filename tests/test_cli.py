@@ -4,6 +4,7 @@ one stored config for one intent whatever its spelling, and resume under any spe
 from __future__ import annotations
 
 import dataclasses
+import json
 import re
 import shlex
 import subprocess
@@ -15,10 +16,12 @@ import pytest
 from conftest import ROOT, committed_runs, final_arrays, snapshot
 
 from reach_jax import errors
-from reach_jax.config import Config, LearnerConfig, TrainConfig, hyper
-from reach_jax.engine import batch
+from reach_jax.config import Config, LearnerConfig, TrainConfig, compat, hyper
+from reach_jax.config.schema import DEFAULT_SPEED
+from reach_jax.engine import batch, xla_options
 from reach_jax.store import checkpoint
 from reach_jax.store import run_dir as run_dir_io
+from reach_jax.store.checkpoint import CheckpointError
 from reach_jax.train import arguments
 from reach_jax.train import cli as train_cli
 
@@ -206,7 +209,9 @@ def test_bad_hyperparameter_names_and_values_fail_in_one_line_and_write_nothing(
 def fresh_run(run_dir, cfg: Config) -> None:
     """A run directory as a fresh run leaves it before its first chunk: config.json and checkpoint 0."""
     run_dir_io.create(run_dir, cfg)
-    run_dir_io.write_checkpoint(run_dir, 0, jax.device_get(batch.init_batch(cfg)), cfg)
+    run_dir_io.write_checkpoint(
+        run_dir, 0, jax.device_get(batch.init_batch(cfg)), cfg, DEFAULT_SPEED, xla_options.engine()
+    )
 
 
 SPELLINGS = [[], ["--lr", "0.5"], ["--sweep", "lr=0.5"], ["--set", "learner.lr=0.5"], ["--set", "train.lr_grid=[0.5]"]]
@@ -259,14 +264,26 @@ def readme_command(run: str) -> list[str]:
     return argv
 
 
+def stored_engine(run: str) -> str:
+    """The engine that trained a run, as its newest checkpoint says."""
+    with np.load(checkpoint.list_checkpoints(f"runs/{run}")[-1]) as data:
+        speed = json.loads(data["__meta__"].tobytes()).get("speed", {})
+    return speed.get("engine", compat.SPEED_BEFORE_STORED["engine"])
+
+
 @pytest.mark.parametrize("run", RUNS)
 def test_the_committed_runs_resume_bare_and_with_their_readmes_command(run, monkeypatch):
     # Their config.json may hold one-value grids (written before --sweep); their READMEs spell the new flags. Each
-    # resumes from its newest checkpoint.
+    # resumes from its newest checkpoint, or, trained under another engine, is refused for that alone: the engine
+    # is checked last, once the checkpoint has been read and its config has matched.
     monkeypatch.chdir(ROOT)
     assert {"table2", "heldout", "heldout_round2"} <= set(RUNS) and len(RUNS) > 10
     newest = checkpoint.checkpoint_chunk(checkpoint.list_checkpoints(f"runs/{run}")[-1])
     for argv in ([], readme_command(run)):
+        if stored_engine(run) != xla_options.engine():
+            with pytest.raises(CheckpointError, match=f"speed.engine is '{stored_engine(run)}'"):
+                train_cli.parse(["--resume", f"runs/{run}", *argv])
+            continue
         inv = train_cli.parse(["--resume", f"runs/{run}", *argv])
         assert inv.prepared.resume and inv.cfg == run_dir_io.read_config(f"runs/{run}"), argv
         assert inv.prepared.chunk == newest, argv

@@ -489,7 +489,7 @@ def test_sparse_layer1_ts_step_equals_dense(kind):
     (w1, b1), *_ = network.dense_layers(params)
     u1 = xs[0] @ w1 + b1
     dense = _TS_STEP(params, xs[1], learner.Pending(**pend, u1=u1), n_max, lr)
-    sparse = _TS_STEP_SPARSE(params, xs[1], learner.Pending(**pend, u1=u1, rows=rows[0]), n_max, lr, rows[1])
+    sparse = _TS_STEP_SPARSE(params, xs[1], learner.Pending(**pend, u1=u1), n_max, lr, rows[1])
     # Only the order of the additions differs.
     chex.assert_trees_all_close(sparse, dense, rtol=RTOL, atol=ATOL)
     rows_touched = np.flatnonzero(np.any(np.asarray(network.dense_layers(sparse[0])[0][0] != w1), axis=1))

@@ -29,7 +29,7 @@ from reach_jax.config import (
     to_dict,
 )
 from reach_jax.config.schema import MAX_HIDDEN_PAD, Speed
-from reach_jax.engine import batch
+from reach_jax.engine import batch, xla_options
 from reach_jax.engine.chunk import make_chunk
 from reach_jax.errors import error_line, printable
 from reach_jax.store import checkpoint, run_lock
@@ -139,7 +139,10 @@ def test_a_checkpoint_from_before_a_new_hyperparameter_resumes_it_from_the_confi
 def test_a_resume_under_another_sparse_layer1_is_refused_and_an_unstored_one_means_on(uninterrupted, tmp_path):
     out, older = older_copy(uninterrupted, tmp_path)
     with np.load(older) as data:
-        assert json.loads(data["__meta__"].tobytes())["speed"] == {"sparse_layer1": True}
+        assert json.loads(data["__meta__"].tobytes())["speed"] == {
+            "sparse_layer1": True,
+            "engine": xla_options.engine(),
+        }
     cfg, dense = run_dir_io.read_config(out), Speed(sparse_layer1=False)
     before = snapshot(out)
     with pytest.raises(checkpoint.CheckpointError, match="speed.sparse_layer1 is True; resuming with False") as exc:
@@ -149,9 +152,29 @@ def test_a_resume_under_another_sparse_layer1_is_refused_and_an_unstored_one_mea
     edit_meta(older, lambda meta: meta["speed"].update(sparse_layer1=False))
     assert train_cli.main(["--resume", str(out), "--quiet"]) == errors.EXIT_USAGE
     # Checkpoints written before the setting was stored were all made with it on.
-    edit_meta(older, lambda meta: meta.pop("speed"))
+    edit_meta(older, lambda meta: meta["speed"].pop("sparse_layer1"))
     with pytest.raises(checkpoint.CheckpointError, match="speed.sparse_layer1"):
         train.prepare(cfg, out, resume=True, speed=dense)
+    assert_resumes_to(uninterrupted, out)
+
+
+def test_a_run_resumes_only_under_the_engine_that_trained_it(uninterrupted, tmp_path, capsys):
+    out, older = older_copy(uninterrupted, tmp_path)
+    edit_meta(older, lambda meta: meta["speed"].update(engine="cpu-fma"))
+    cfg, before = run_dir_io.read_config(out), snapshot(out)
+    with pytest.raises(
+        checkpoint.CheckpointError, match=f"speed.engine is 'cpu-fma'; resuming with '{xla_options.engine()}'"
+    ):
+        train.run(cfg, out, resume=True, progress=False)
+    # A checkpoint that stored no engine was trained by the code before it, which no longer lives here: the error
+    # names the commit that can resume it, in one line, and nothing is written.
+    edit_meta(older, lambda meta: meta.pop("speed"))
+    before = snapshot(out)
+    assert train_cli.main(["--resume", str(out), "--quiet"]) == errors.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "'cpu-fma-kernels'" in err and "c0a0a95" in err, err
+    assert snapshot(out) == before
+    edit_meta(older, lambda meta: meta.update(speed={"sparse_layer1": True, "engine": xla_options.engine()}))
     assert_resumes_to(uninterrupted, out)
 
 

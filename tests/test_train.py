@@ -344,8 +344,6 @@ def test_matvec2_rounds_as_the_dot_it_replaced():
     v = jnp.asarray(rng.standard_normal((20_000, 2)), jnp.float32)
     fused = jax.jit(jax.vmap(fields.matvec2))(a, v)
     dot = jax.jit(jax.vmap(jnp.matmul))(a, v)
-    # Written a[:, 0] v[0] + a[:, 1] v[1] instead, a third of these products differ here: XLA:CPU then contracts
-    # the other product into its fused multiply-add.
     np.testing.assert_array_equal(np.asarray(fused), np.asarray(dot))
 
 

@@ -32,17 +32,15 @@ class Pending(NamedTuple):
     terminal: jax.Array  # () bool: the transition ended its trial at the goal or a limit
     reward: jax.Array  # () reinforcement that ended the trial, 0 otherwise
     u1: jax.Array | None = None  # (hidden,) layer-1 pre-activation of x under the current weights; None: recompute
-    rows: jax.Array | None = None  # (20,) int32 coded rows of x that may be non-zero; None: use every row
     gain: jax.Array | float = 1.0  # () factor on the actor's signal for this step (`exploration.actor_gain`)
 
 
-def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None = None) -> Pending:
+def empty_pending(n_in: int, n_hidden: int | None = None) -> Pending:
     """A Pending that triggers no update.
 
     Args:
       n_in: number of network inputs (125).
       n_hidden: width of the first hidden layer (30); None leaves `u1` unset (recomputed when needed).
-      rows: (20,) int32 support rows to carry (any distinct valid rows: x is 0); None: dense updates.
     """
     return Pending(
         x=jnp.zeros(n_in),
@@ -52,7 +50,6 @@ def empty_pending(n_in: int, n_hidden: int | None = None, rows: jax.Array | None
         terminal=jnp.array(False),
         reward=jnp.array(0.0),
         u1=None if n_hidden is None else jnp.zeros(n_hidden),
-        rows=rows,
         gain=jnp.ones(()),  # strong-typed, as the chunk returns it
     )
 
@@ -115,12 +112,14 @@ def _layer1_input_product(x: jax.Array, w1: jax.Array, rows: jax.Array | None, n
     return total
 
 
-def _layer1_sgd(w1: jax.Array, x: jax.Array, scaled: jax.Array, rows: jax.Array | None, n_visual: int):
-    """w1 - outer(x, scaled), writing only the visual rows and the coded `rows` when they are given."""
-    if rows is None:
-        return w1 - x[:, None] * scaled
-    w1 = w1.at[:n_visual].add(-x[:n_visual, None] * scaled)
-    return w1.at[rows].add(-x[rows][:, None] * scaled, indices_are_sorted=True, unique_indices=True)
+def _layer1_sgd(w1: jax.Array, x: jax.Array, scaled: jax.Array):
+    """w1 - outer(x, scaled) over every row.
+
+    The rows where x is 0 come out unchanged, so this equals an update of the non-zero rows alone bit for bit;
+    written densely, because an update of chosen rows is a scatter, which keeps XLA:CPU from compiling the step
+    loop as one kernel (`xla_options.CPU_XLA_FLAGS`).
+    """
+    return w1 - x[:, None] * scaled
 
 
 def _forward_pair(layers, x_now: jax.Array, pending: Pending, rows_now: jax.Array | None, n_visual: int):
@@ -149,7 +148,7 @@ def _forward_pair(layers, x_now: jax.Array, pending: Pending, rows_now: jax.Arra
     return acts, u1_now
 
 
-def _backprop_sgd(layers, acts, delta: jax.Array, step: jax.Array, rows: jax.Array | None, n_visual: int):
+def _backprop_sgd(layers, acts, delta: jax.Array, step: jax.Array):
     """Backprop on the x(t-1) row through the old weights, each layer's SGD step taken as the signal passes it.
 
     Args:
@@ -157,8 +156,6 @@ def _backprop_sgd(layers, acts, delta: jax.Array, step: jax.Array, rows: jax.Arr
       acts: each layer's inputs for (x(t), x(t-1)) (`_forward_pair`).
       delta: (3,) the output layer's error signal, -err f'(u).
       step: () the step size; 0 leaves every weight as it is.
-      rows: x(t-1)'s coded rows that may be non-zero (`Pending.rows`); None: every row.
-      n_visual: the visual rows, the first of the input.
 
     Returns:
       (the layers of W(t+1), the layer-1 error signal delta1 (hidden,)).
@@ -172,7 +169,7 @@ def _backprop_sgd(layers, acts, delta: jax.Array, step: jax.Array, rows: jax.Arr
             new_layers[i] = (w - below[:, None] * scaled, b - scaled)
             delta = jnp.sum(w * delta, axis=1) * _squash_slope(below)
         else:
-            new_layers[i] = (_layer1_sgd(w, below, scaled, rows, n_visual), b - scaled)
+            new_layers[i] = (_layer1_sgd(w, below, scaled), b - scaled)
     return new_layers, delta
 
 
@@ -216,9 +213,9 @@ def ts_step(
     err = jnp.where(pending.valid, target - out_prev, 0.0)
     loss = 0.5 * jnp.sum(err**2)
     step = jnp.where(pending.valid, lr, 0.0)
-    new_layers, delta = _backprop_sgd(layers, acts, -err * _squash_slope(out_prev), step, pending.rows, n_visual)
+    new_layers, delta = _backprop_sgd(layers, acts, -err * _squash_slope(out_prev), step)
     bias_input = 1.0 if cfg.network.use_bias else 0.0
-    u1_next = u1_now - step * delta * (jnp.dot(pending.x, x_now) + bias_input)
+    u1_next = u1_now - step * delta * (jnp.sum(pending.x * x_now) + bias_input)
     return network.with_dense_layers(params, new_layers), out_now, loss, u1_next
 
 

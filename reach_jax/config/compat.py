@@ -93,8 +93,11 @@ ADDED_STATE_FIELDS = ("agent.pending_learning", "env.cond", "env.block", "agent.
 _ADDED_STATS = ("clean_goals", "gate_open", "steps", "saturated", "starts", "start_value")
 ADDED_STATE_FIELDS += tuple(f"counters.stats.{name}" for name in _ADDED_STATS)
 
-# The result-changing speed settings (`schema.SPEED_RESULT_FIELDS`) of checkpoints written before they were stored.
-SPEED_BEFORE_STORED = {"sparse_layer1": True}
+# The result-changing speed settings (`schema.SPEED_RESULT_FIELDS`) and engine of checkpoints written before they
+# were stored: until the step loop became one kernel, XLA:CPU contracted multiply-adds as each kernel's shape let it.
+SPEED_BEFORE_STORED = {"sparse_layer1": True, "engine": "cpu-fma-kernels"}
+# Where the code that trained an engine no longer made here lives, for the error that refuses to resume its runs.
+ENGINE_CODE = {"cpu-fma-kernels": " (that engine is reach_jax's up to commit c0a0a95: resume the run with that code)"}
 
 _STATES = "['states']."
 

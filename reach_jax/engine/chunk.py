@@ -19,8 +19,10 @@ from reach_jax.engine.learner_state import LearnerState
 from reach_jax.env import trial_log
 
 
-def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED, log=None):
-    """lax.scan of `step((state, log), u) -> ((state, log), info)` over n_steps, drawing uniforms in blocks.
+def scan_steps(
+    step, state, n_steps: int, cfg: Config, batched: bool = False, speed: Speed = DEFAULT_SPEED, log=None, fold=None
+):
+    """lax.scan of `step(state, u) -> (state, info)` over n_steps, drawing uniforms in blocks.
 
     Drawing a block of steps' uniforms in one vectorised call keeps the random-number loop out of the per-step
     body, where it cost as many kernel launches as the rest of the step. The stream does not depend on the block
@@ -34,10 +36,12 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
       cfg: model config.
       batched: state and step carry a leading learner axis.
       speed: the draw block and the hidden padding.
-      log: carried alongside the state for the step to fill (the per-trial log, `trial_log.TrialBuffer`), or None.
+      log: with `fold`, the log to fill (the per-trial log, `trial_log.TrialBuffer`).
+      fold: None to stack every step's info; else `(log, infos) -> log`, called after each block of steps with
+        their infos stacked, so that what writes the log stays out of the compiled step loop.
 
     Returns:
-      (state after n_steps, log after them, info stacked over the steps).
+      (state after n_steps, the infos stacked over the steps), or with `fold`, (that state, the log).
     """
 
     def draws(s: LearnerState, n: int) -> jax.Array:
@@ -46,19 +50,22 @@ def scan_steps(step, state, n_steps: int, cfg: Config, batched: bool = False, sp
         u = jax.vmap(lambda k, first: random_stream.step_uniforms(k, first, n, cfg))(s.key, s.counters.steps)
         return jnp.swapaxes(u, 0, 1)
 
-    def block_body(carry, _):
-        return jax.lax.scan(step, carry, draws(carry[0], block))
+    def run_block(carry, n: int):
+        s, kept = carry
+        s, info = jax.lax.scan(step, s, draws(s, n))
+        return ((s, kept), info) if fold is None else ((s, fold(kept, info)), None)
 
     block = block_size(n_steps, speed.draw_block)
     n_blocks, rest = divmod(n_steps, block)
     carry = (widen_hidden(state, speed.hidden_pad), log)
-    carry, info = jax.lax.scan(block_body, carry, None, length=n_blocks)
+    carry, info = jax.lax.scan(lambda c, _: run_block(c, block), carry, None, length=n_blocks)
     info = jax.tree.map(lambda a: a.reshape(n_blocks * block, *a.shape[2:]), info)
     if rest:
-        carry, tail = jax.lax.scan(step, carry, draws(carry[0], rest))
+        carry, tail = run_block(carry, rest)
         info = jax.tree.map(lambda a, b: jnp.concatenate([a, b]), info, tail)
     state, log = carry
-    return narrow_hidden(state, cfg), log, info
+    state = narrow_hidden(state, cfg)
+    return (state, info) if fold is None else (state, log)
 
 
 def block_size(n_steps: int, most: int) -> int:
@@ -105,7 +112,8 @@ def chunk_body(cfg: Config, n_steps: int, speed: Speed):
     batched = jax.vmap(
         lambda s, u, p, h, b: rollout.budgeted_step(s, u, p, h, b, cfg, speed), in_axes=(0, 0, 0, 0, None)
     )
-    fill = jax.vmap(lambda b, i, n: trial_log.log_trial(b, i.ended, i.record, n, every))
+    # A block's steps (leading axis) of every learner into that learner's buffer.
+    fold = jax.vmap(lambda b, e: trial_log.log_block(b, *e, every), in_axes=(0, 1))
 
     def chunk(states, plans, hypers, budget):
         counters = states.counters
@@ -113,15 +121,13 @@ def chunk_body(cfg: Config, n_steps: int, speed: Speed):
         n_learners = states.env.trials.shape[0]
         log = jax.vmap(lambda _: trial_log.empty_buffer(cfg))(jnp.arange(n_learners)) if every else None
 
-        def step_body(carry, u):
-            s, buffers = carry
+        def step_body(s, u):
             new, info = batched(s, u, plans, hypers, budget)
-            if buffers is not None:
-                buffers = fill(buffers, info, s.env.trials)
-            return (new, buffers), None
+            return new, ((info.ended, info.record, s.env.trials) if every else None)
 
-        states, log, _ = scan_steps(step_body, states, n_steps, cfg, batched=True, speed=speed, log=log)
-        return states, log
+        return scan_steps(
+            step_body, states, n_steps, cfg, batched=True, speed=speed, log=log, fold=fold if every else None
+        )
 
     return chunk
 
@@ -133,12 +139,7 @@ def make_trace(cfg: Config, n_steps: int, speed: Speed = DEFAULT_SPEED):
     """
 
     def trace(state, plan, hyper):
-        def step_body(carry, u):
-            new, info = rollout.learner_step(carry[0], u, plan, hyper, cfg, speed=speed)
-            return (new, None), info
-
-        state, _, info = scan_steps(step_body, state, n_steps, cfg, speed=speed)
-        return state, info
+        return scan_steps(lambda s, u: rollout.learner_step(s, u, plan, hyper, cfg, speed=speed), state, n_steps, cfg)
 
     return jax.jit(trace)
 

@@ -9,10 +9,7 @@ from __future__ import annotations
 
 import argparse
 import difflib
-import functools
 import os
-import subprocess
-import sys
 import warnings
 from typing import NamedTuple
 
@@ -22,14 +19,8 @@ import numpy as np
 from jax.experimental import multihost_utils
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from reach_jax.engine import xla_options
 from reach_jax.errors import OneLineError, UsageError, non_negative_int, positive_int, whole_number
-
-# XLA:CPU hands small reductions to YNNPACK by default; for the per-learner 30x10 and 10x3 products that
-# made the step ~1.6x slower at 128 learners (benchmarks/throughput.py). Keep YNNPACK for real dots only.
-# The option exists only in the CPU compiler; other backends ignore it. It changes which kernels run, so a
-# run and its resumption must both have it (every command line and the test suite call setup_backend).
-CPU_XLA_FLAGS = ("--xla_cpu_experimental_ynn_fusion_type=LIBRARY_FUSION_TYPE_INDIVIDUAL_DOT",)
-PROBE_TIMEOUT = 120  # [s] for the child process that checks this jaxlib accepts CPU_XLA_FLAGS
 
 
 class Cluster(NamedTuple):
@@ -59,54 +50,6 @@ def available_cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
-def jax_started() -> bool:
-    """Whether JAX has created its backends, after which XLA_FLAGS and the CPU device count are fixed."""
-    # JAX has no public query for this (jax-ml/jax#23320); its config refuses a new CPU device count once the
-    # backends exist, so ask for one and put the old value back.
-    count = jax.config.jax_num_cpu_devices
-    try:
-        jax.config.update("jax_num_cpu_devices", count + 1)
-    except RuntimeError:
-        return True
-    jax.config.update("jax_num_cpu_devices", count)
-    return False
-
-
-@functools.cache
-def flags_accepted(flags: tuple[str, ...]) -> bool:
-    """Whether this jaxlib starts with `flags` in XLA_FLAGS; XLA aborts a process on an unknown flag, so a child
-    process tries them."""
-    env = {**os.environ, "XLA_FLAGS": " ".join((os.environ.get("XLA_FLAGS", ""), *flags)).strip()}
-    probe = "import jax, jax.numpy as jnp; jnp.zeros(1).block_until_ready()"
-    try:
-        done = subprocess.run(
-            [sys.executable, "-c", probe], env=env, capture_output=True, timeout=PROBE_TIMEOUT, check=False
-        )
-    except (OSError, subprocess.TimeoutExpired):
-        return False
-    return done.returncode == 0
-
-
-def add_xla_flags(flags: tuple[str, ...] = CPU_XLA_FLAGS) -> bool:
-    """Append `flags` to XLA_FLAGS unless they are there, if this jaxlib accepts them; returns whether they are set.
-
-    Warns, and leaves XLA_FLAGS alone, when JAX has already started (they would not take effect) or when the
-    jaxlib rejects them (a future version may drop an option): training then runs, a little slower.
-    """
-    current = os.environ.get("XLA_FLAGS", "")
-    missing = tuple(f for f in flags if f.split("=")[0] not in current)
-    if not missing:
-        return True
-    if jax_started():
-        warnings.warn(f"JAX already started; XLA_FLAGS {' '.join(missing)} not applied", stacklevel=2)
-        return False
-    if not flags_accepted(missing):
-        warnings.warn(f"this jaxlib rejects XLA_FLAGS {' '.join(missing)}; running without them", stacklevel=2)
-        return False
-    os.environ["XLA_FLAGS"] = " ".join((current, *missing)).strip()
-    return True
-
-
 def setup_backend(devices: int | None = None, cluster: Cluster | None = None) -> None:
     """Set up JAX before its first computation: CPU compiler options, host device count, multi-process run.
 
@@ -118,7 +61,7 @@ def setup_backend(devices: int | None = None, cluster: Cluster | None = None) ->
         cluster environment (SLURM, Open MPI, Cloud TPU). Raises ClusterError when they cannot be found.
         A process that cannot reach the others within `init_timeout` is ended by jax itself (SIGABRT).
     """
-    add_xla_flags()
+    xla_options.add_xla_flags()
     try:
         jax.config.update("jax_num_cpu_devices", available_cores() if devices is None else devices)
     except RuntimeError:  # JAX has already computed (called in-process, e.g. from a notebook): keep its devices

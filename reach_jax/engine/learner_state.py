@@ -16,7 +16,6 @@ from reach_jax import env
 from reach_jax.agent import learner, network
 from reach_jax.config import Config, n_inputs
 from reach_jax.env import protocol, task, trial_log
-from reach_jax.physics import encoding
 
 
 class Stats(NamedTuple):
@@ -77,12 +76,11 @@ def init_learner(key: jax.Array, plan: protocol.Plan, cfg: Config) -> LearnerSta
     draws = task.draw_trial(k_trial, cfg)
     state = env.reset(draws, plan, cfg)
     start = state.trial.arm
-    rows = encoding.coded_support(start, start, jnp.zeros(2), cfg)
     return LearnerState(
         key=k_run,
         agent=AgentState(
             params=network.init_params(k_param, cfg),
-            pending=learner.empty_pending(n_inputs(cfg), cfg.network.hidden[0], rows),
+            pending=learner.empty_pending(n_inputs(cfg), cfg.network.hidden[0]),
             pending_learning=state.block.learning,
             n_max=jnp.asarray(cfg.learner.n_max_init, dtype=float),  # strong-typed, as the chunk returns it
         ),

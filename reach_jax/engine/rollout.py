@@ -55,12 +55,11 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
     """
     agent = state.agent
     sparse = speed.sparse_layer1
-    pending_in = agent.pending if sparse else agent.pending._replace(rows=None)
     lr = jnp.where(learns, hyper.lr, 0.0)
     params, out, loss, u1 = learner.ts_step(
         agent.params,
         x,
-        pending_in,
+        agent.pending,
         agent.n_max,
         lr,
         cfg,
@@ -99,12 +98,12 @@ def learner_step(
     agent, trial = state.agent, state.env.trial
     unit, draws = random_stream.split_uniforms(u, cfg)
     x = env.observe(state.env, cfg)
-    rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)  # carried in the pending step
+    rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)
     learns = agent.pending_learning if active is None else active & agent.pending_learning
     params, out, loss, u1, rnd, gain, tau = act(state, x, rows, unit, hyper, learns, cfg, speed)
     params_env = env.env_params(plan, hyper)
     new_env, outcome = env.step(state.env, tau, draws, params_env, cfg)
-    pending = _pending(outcome, cfg, x=x, out=out, rnd=rnd, u1=u1, rows=rows, gain=gain)
+    pending = _pending(outcome, cfg, x=x, out=out, rnd=rnd, u1=u1, gain=gain)
     # With hyper n_max_clean a drift-aided success leaves N_max as it is (eq. 3 on clean successes only).
     counted = outcome.goal & ~((hyper.n_max_clean > 0) & trial.drifted)
     n_max = jnp.where(counted, learner.update_n_max(agent.n_max, outcome.t, hyper.lam), agent.n_max)
@@ -131,7 +130,7 @@ def _pending(outcome: env.TrialStatus, cfg: Config, **step) -> learner.Pending:
     Args:
       outcome: the environment's step.
       cfg: model config (the rewards).
-      **step: the step's x, out, rnd, u1, rows and gain (`learner.Pending`).
+      **step: the step's x, out, rnd, u1 and gain (`learner.Pending`).
     """
     goal, out_of_range = outcome.goal, outcome.out_of_range
     reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)

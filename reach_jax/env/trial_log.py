@@ -78,7 +78,7 @@ def advance(trace: TrialTrace, hand: jax.Array, hand_vel: jax.Array, t: jax.Arra
     faster = speed > trace.peak_speed
     at_direction = t == max(round(cfg.train.direction_time / cfg.arm.dt), 1)
     across = perpendicular(trace.aim, moved)
-    direction = jnp.arctan2(across, jnp.dot(trace.aim, moved))
+    direction = jnp.arctan2(across, jnp.sum(trace.aim * moved))  # no dot in the step loop (CPU_XLA_FLAGS)
     return trace.replace(
         peak_speed=jnp.where(faster, speed, trace.peak_speed),
         perp=jnp.where(faster, across, trace.perp),
@@ -121,12 +121,24 @@ def empty_buffer(cfg: Config) -> TrialBuffer:
     )
 
 
-def log_trial(buffer: TrialBuffer, ended: jax.Array, row: jax.Array, trial: jax.Array, every: int) -> TrialBuffer:
-    """buffer with `row` (len(COLUMNS),) added if the step `ended` trial index `trial`, a multiple of `every`."""
-    keep = ended & (trial % every == 0)
-    i = jnp.minimum(buffer.count, buffer.trial.shape[0] - 1)
+def log_block(buffer: TrialBuffer, ended: jax.Array, rows: jax.Array, trials: jax.Array, every: int) -> TrialBuffer:
+    """buffer with a block of steps' ended trials appended in order, those whose index is a multiple of `every`.
+
+    Written once a block of steps, outside the compiled step loop: a write at a per-learner position inside
+    the loop is a scatter, which keeps XLA:CPU from compiling the loop as one kernel (`xla_options.CPU_XLA_FLAGS`).
+
+    Args:
+      buffer: the learner's buffer.
+      ended: (B,) bool, each step of the block ended a trial.
+      rows: (B, len(COLUMNS)) the records of those trials.
+      trials: (B,) int32 index of the trial each step ran.
+      every: log every `every`-th trial.
+    """
+    keep = ended & (trials % every == 0)
+    capacity = buffer.trial.shape[0]
+    slot = jnp.where(keep, buffer.count + jnp.cumsum(keep) - 1, capacity)  # dropped: past the end
     return TrialBuffer(
-        rows=buffer.rows.at[i].set(jnp.where(keep, row, buffer.rows[i])),
-        trial=buffer.trial.at[i].set(jnp.where(keep, trial, buffer.trial[i])),
-        count=buffer.count + keep,
+        rows=buffer.rows.at[slot].set(rows, mode="drop"),
+        trial=buffer.trial.at[slot].set(trials, mode="drop"),
+        count=buffer.count + jnp.sum(keep, dtype=jnp.int32),
     )

@@ -139,7 +139,9 @@ def elbow_stop(state: jax.Array, cfg: ArmConfig) -> jax.Array:
     past = state[1] >= cfg.theta2_stop
     theta2 = jnp.where(past, cfg.theta2_stop, state[1])
     omega2 = jnp.where(past, jnp.minimum(state[3], 0.0), state[3])
-    return state.at[1].set(theta2).at[3].set(omega2)
+    # Rebuilt rather than written in place: an indexed write is a scatter, which keeps XLA:CPU from compiling
+    # the step loop as one kernel (`xla_options.CPU_XLA_FLAGS`).
+    return jnp.stack([state[0], theta2, state[2], omega2])
 
 
 def is_out(state: jax.Array, cfg: ArmConfig) -> jax.Array:

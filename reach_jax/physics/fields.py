@@ -41,8 +41,7 @@ def hand_force(field: Field, hand: jax.Array, hand_vel: jax.Array, trial_force: 
 def matvec2(a: jax.Array, v: jax.Array) -> jax.Array:
     """(2, 2) @ (2,) as elementwise products, which XLA fuses with their neighbours instead of a separate dot.
 
-    Written a[:, 1] v[1] + a[:, 0] v[0] so that XLA:CPU contracts it into the fused multiply-add that its dot
-    computes, fma(a[:, 1], v[1], a[:, 0] v[0]), and the result is the dot's bit for bit.
+    Without fused multiply-adds (`xla_options.NO_FMA_FLAG`) it rounds as XLA's dot does, bit for bit.
     """
     return a[:, 1] * v[1] + a[:, 0] * v[0]
 

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from reach_jax.config import Config, compat, first_difference, from_dict, hyper, to_dict, to_json
-from reach_jax.config.schema import DEFAULT_SPEED, SPEED_RESULT_FIELDS, Speed
+from reach_jax.config.schema import SPEED_RESULT_FIELDS, Speed
 from reach_jax.engine import batch, learner_state
 from reach_jax.env import trial_log
 from reach_jax.store import checkpoint, files, metrics_log
@@ -157,41 +157,41 @@ def truncate_trials(run_dir: Path, chunk: int) -> None:
             os.truncate(path, keep * np.dtype(dtype).itemsize)
 
 
-def speed_settings(speed: Speed) -> dict:
-    """The settings of `speed` that change results (`SPEED_RESULT_FIELDS`), as a checkpoint stores them."""
-    return {name: getattr(speed, name) for name in SPEED_RESULT_FIELDS}
+def speed_settings(speed: Speed, engine: str) -> dict:
+    """What of how a run computes changes its results, as a checkpoint stores it: the settings of `speed` that do
+    (`SPEED_RESULT_FIELDS`) and the arithmetic's engine (`distribute.engine`)."""
+    return {**{name: getattr(speed, name) for name in SPEED_RESULT_FIELDS}, "engine": engine}
 
 
-def write_checkpoint(
-    run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config, speed: Speed = DEFAULT_SPEED
-) -> Path:
-    """Save the learner states and hyperparameters after `chunk` chunks, with the config and the speed settings
-    that change results as the run's identity."""
+def write_checkpoint(run_dir: Path, chunk: int, learners: batch.Batch, cfg: Config, speed: Speed, engine: str) -> Path:
+    """Save the learner states and hyperparameters after `chunk` chunks, with the config, the speed settings
+    that change results and the engine as the run's identity."""
     tree = {"states": learners.states, "hypers": learners.hypers}
-    meta = {"config": to_dict(cfg), "speed": speed_settings(speed)}
+    meta = {"config": to_dict(cfg), "speed": speed_settings(speed, engine)}
     return checkpoint.save(run_dir, chunk, tree, meta, cfg.train.keep_every)
 
 
-def check_speed(path: Path, meta: dict, speed: Speed) -> None:
-    """Raise CheckpointError if `speed` would change the results of the run that wrote checkpoint `path`."""
+def check_speed(path: Path, meta: dict, speed: Speed, engine: str) -> None:
+    """Raise CheckpointError if `speed` or `engine` would change the results of the run that wrote `path`."""
     stored = meta.get("speed", {})
     if not isinstance(stored, dict):
         raise CheckpointError(f"{path}: field speed is not an object")
-    for name, wanted in speed_settings(speed).items():
+    for name, wanted in speed_settings(speed, engine).items():
         made = stored.get(name, compat.SPEED_BEFORE_STORED[name])
         if made != wanted:
+            hint = compat.ENGINE_CODE.get(made, "") if name == "engine" else ""
             raise CheckpointError(
-                f"{path}: field speed.{name} is {made!r}; resuming with {wanted!r} would change the results"
+                f"{path}: field speed.{name} is {made!r}; resuming with {wanted!r} would change the results{hint}"
             )
 
 
 def load_batch(
-    run_dir: Path, cfg: Config, path: Path | None = None, speed: Speed | None = None
+    run_dir: Path, cfg: Config, path: Path | None = None, speed: Speed | None = None, engine: str | None = None
 ) -> tuple[batch.Batch, int]:
     """Newest (or given) checkpoint of a run as a Batch, with its chunk index.
 
     Raises CheckpointError when there is none, when the config stored in it disagrees with `cfg`, or when
-    `speed` (the speed to continue with; None: not checked) has another setting that changes results.
+    `speed` and `engine` (what the run continues with, `check_speed`; None: not checked) would change results.
     """
     hypers = batch.hyper_columns(cfg)
     template = {"states": _state_shapes(cfg, jax.config.jax_enable_x64), "hypers": hypers}
@@ -215,7 +215,7 @@ def load_batch(
     if diff:
         raise CheckpointError(f"{path}: field config.{diff} disagrees with {CONFIG_FILE}")
     if speed is not None:
-        check_speed(path, meta, speed)
+        check_speed(path, meta, speed, engine)
     states, hypers = (jax.tree.map(jnp.asarray, tree[k]) for k in ("states", "hypers"))
     return batch.Batch(states, batch.conditions(cfg), hypers, batch.plans(cfg)), int(meta["chunk"])
 

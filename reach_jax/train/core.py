@@ -22,8 +22,8 @@ def make_train(cfg: Config, n_steps: int):
     """Pure `train(key, plan, hyper) -> LearnerState` for one learner; jit(vmap(train)) trains many."""
 
     def train(key, plan, hyper):
-        def step_body(carry, u):
-            return (rollout.learner_step(carry[0], u, plan, hyper, cfg)[0], None), None
+        def step_body(state, u):
+            return rollout.learner_step(state, u, plan, hyper, cfg)[0], None
 
         return scan_steps(step_body, learner_state.init_learner(key, plan, cfg), n_steps, cfg)[0]
 

@@ -10,7 +10,7 @@ import jax
 
 from reach_jax.config import Config, TrainConfig
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
-from reach_jax.engine import batch
+from reach_jax.engine import batch, xla_options
 from reach_jax.store import run_dir as run_dir_io
 
 
@@ -26,6 +26,7 @@ class Prepared(NamedTuple):
     run_dir: Path  # where the run lives
     resume: bool  # continue from the newest checkpoint
     speed: Speed  # how the compiled chunk runs
+    engine: str  # the arithmetic it runs with (`distribute.engine`), stored with every checkpoint
     learners: batch.Batch | None  # resuming: the newest checkpoint's learners; else None (fresh ones)
     chunk: int  # chunks already trained
     networks: tuple | None  # train.init_from: the source run's (LearnerState, learner table), `load_networks`
@@ -41,17 +42,18 @@ def prepare(
     ValueError when train.init_from lacks a network. Arguments as in `run`.
     """
     run_dir = default_run_dir(cfg.train) if run_dir is None else Path(run_dir)
+    engine = xla_options.engine()
     if resume:
         # Every process reads it: process 0 writes the next checkpoint only after a gather of every slice.
-        learners, chunk = run_dir_io.load_batch(run_dir, cfg, speed=speed)
-        return Prepared(cfg, run_dir, True, speed, learners, chunk, None)
+        learners, chunk = run_dir_io.load_batch(run_dir, cfg, speed=speed, engine=engine)
+        return Prepared(cfg, run_dir, True, speed, engine, learners, chunk, None)
     if jax.process_index() == 0 and run_dir_io.holds_run(run_dir):
         raise FileExistsError(f"{run_dir} already holds a run; resume it instead")
     networks = None
     if cfg.train.init_from:
         networks = run_dir_io.load_networks(cfg)
         batch.source_indices(networks[1], cfg)
-    return Prepared(cfg, run_dir, False, speed, None, 0, networks)
+    return Prepared(cfg, run_dir, False, speed, engine, None, 0, networks)
 
 
 def begin(prep: Prepared) -> batch.Batch:
@@ -68,5 +70,5 @@ def begin(prep: Prepared) -> batch.Batch:
         group = group._replace(states=batch.start_from(group.states, *prep.networks, prep.cfg))
     if writer:
         run_dir_io.create(prep.run_dir, prep.cfg)
-        run_dir_io.write_checkpoint(prep.run_dir, 0, group, prep.cfg, prep.speed)
+        run_dir_io.write_checkpoint(prep.run_dir, 0, group, prep.cfg, prep.speed, prep.engine)
     return group

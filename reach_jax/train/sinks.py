@@ -52,7 +52,9 @@ class CheckpointSink(Sink):
     def chunk(self, done: Finished, rows: list[dict]) -> None:
         """Save the learners after the chunk."""
         learners = self.group._replace(states=done.states)
-        run_dir_io.write_checkpoint(self.prep.run_dir, done.index, learners, self.prep.cfg, self.prep.speed)
+        run_dir_io.write_checkpoint(
+            self.prep.run_dir, done.index, learners, self.prep.cfg, self.prep.speed, self.prep.engine
+        )
 
     def close(self) -> None:
         """Keep the final checkpoint and the snapshots: the second-newest was kept for safety while the run trained."""

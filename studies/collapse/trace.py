@@ -109,12 +109,11 @@ def make_replay(cfg, n_steps: int):
         stats = jax.tree.map(jnp.zeros_like, states.counters.stats)
         states = states.replace(counters=states.counters.replace(stats=stats))
 
-        def body(carry, u):
-            new, info = step(carry[0], u, plans, hypers, budget)
-            return (new, None), measure(carry[0], info, hypers)
+        def body(states, u):
+            new, info = step(states, u, plans, hypers, budget)
+            return new, measure(states, info, hypers)
 
-        states, _, probes = chunk.scan_steps(body, states, n_steps, cfg, batched=True, speed=DEFAULT_SPEED)
-        return states, probes
+        return chunk.scan_steps(body, states, n_steps, cfg, batched=True, speed=DEFAULT_SPEED)
 
     return jax.jit(replay)
 
