@@ -50,7 +50,7 @@ def test_the_table_has_one_line_per_recipe_and_json_the_same_rows(tmp_path, caps
     header = next(line for line in text.splitlines() if line.startswith("| run "))
     assert all(line.count("|") == header.count("|") for line in lines)
     # The held-out default: claim 1 holds, 32 of 32 learners stable.
-    assert lines[0].split(" | ")[5] == "holds" and " 32/32 " in lines[0]
+    assert lines[0].split(" | ")[6] == "holds" and " 32/32 " in lines[0]
     assert json.loads(out.read_text()) == json.loads(json.dumps(rows))
 
 

@@ -137,8 +137,24 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11 or 12, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12 or 13, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
+
+
+def test_before_version_13_the_elbow_stop_is_the_clamp_and_the_evaluation_judges_both_frames():
+    stored = {**to_dict(Config()), "version": 12}
+    del stored["arm"]["one_link_stop"], stored["eval"]["frames"]
+    cfg = from_dict(stored)
+    assert cfg.arm.one_link_stop is False and Config().arm.one_link_stop is True
+    assert cfg.eval.frames == ("viscous", "viscous_mirror") == Config().eval.frames
+    assert cfg == dataclasses.replace(Config(), arm=dataclasses.replace(Config().arm, one_link_stop=False))
+    partial = {**to_dict(Config()), "version": 1}
+    del partial["arm"]["one_link_stop"]  # a version-1 config that left it out trained with the clamp
+    assert from_dict(partial).arm.one_link_stop is False
+    stored = to_dict(Config())
+    del stored["arm"]["one_link_stop"]  # version 13 stores it
+    with pytest.raises(ValueError, match="^arm.one_link_stop: missing"):
+        from_dict(stored)
 
 
 LEVERS_6 = ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")  # hyperparameters of version 6

@@ -30,9 +30,9 @@ from reach_jax.train import cli as train_cli
 CURL = [[0.0, 13.0], [-13.0, 0.0]]  # [N s/m], a curl field: the force turns the hand velocity by 90 degrees
 
 
-def test_a_user_condition_is_added_to_the_paper_four_and_round_trips():
+def test_a_user_condition_is_added_to_the_shipped_ones_and_round_trips():
     cfg = from_partial({"conditions": {"curl": {"viscous": CURL}, "viscous": {"constant": [1, 2]}}})
-    assert [c.name for c in cfg.conditions] == ["none", "viscous", "random", "random_nopast", "curl"]
+    assert [c.name for c in cfg.conditions] == ["none", "viscous", "random", "random_nopast", "viscous_mirror", "curl"]
     assert condition(cfg, "curl").viscous == ((0.0, 13.0), (-13.0, 0.0))
     # A field given for a paper condition changes that field only.
     assert condition(cfg, "viscous").viscous == PAPER_CONDITIONS[1].viscous
@@ -49,9 +49,26 @@ def test_a_stored_force_section_becomes_the_paper_conditions_fields():
     old = {"version": 1, "force": {"viscous": [[-10.1, -11.2], [-11.2, 11.1]], "random_amplitude": 8.0}}
     then = compat.CHANGED_DEFAULTS[12]
     task_then = TaskConfig(drift_neutral_when_full=False, **then["task"])
-    assert from_dict(old) == dataclasses.replace(Config(), learner=LearnerConfig(**then["learner"]), task=task_then)
+    arm_then = dataclasses.replace(Config().arm, one_link_stop=False)  # the clamp, before config version 13
+    want = dataclasses.replace(Config(), learner=LearnerConfig(**then["learner"]), task=task_then, arm=arm_then)
+    assert from_dict(old) == want
     changed = from_dict({"version": 1, "force": {"random_amplitude": 5.0}})
     assert condition(changed, "random").random == (5.0, 5.0) == condition(changed, "random_nopast").random
+
+
+def test_the_mirrored_field_is_the_paper_field_with_y_reversed():
+    # Both readings of the paper's coordinates (model §6): B' = S B S, S = diag(1, -1), the same eigenvalues with the
+    # pushing axis mirrored about x, from about 113 degrees to about 67.
+    s = np.diag([1.0, -1.0])
+    b, mirrored = (np.asarray(condition(Config(), n).viscous) for n in ("viscous", "viscous_mirror"))
+    np.testing.assert_array_equal(mirrored, s @ b @ s)
+    (lo, hi), vectors = np.linalg.eigh(b)
+    (lo_m, hi_m), vectors_m = np.linalg.eigh(mirrored)
+    assert (lo, hi) == pytest.approx((lo_m, hi_m)) and hi == pytest.approx(15.9, abs=0.05)
+    angle = np.degrees(np.arctan2(vectors[1, 1], vectors[0, 1])) % 180
+    angle_m = np.degrees(np.arctan2(vectors_m[1, 1], vectors_m[0, 1])) % 180
+    assert angle == pytest.approx(113, abs=1) and angle_m == pytest.approx(180 - angle)
+    assert Config().eval.frames == ("viscous", "viscous_mirror")
 
 
 @pytest.mark.parametrize(
@@ -95,12 +112,15 @@ def test_a_fifth_condition_trains_and_evaluates_from_a_config_file(tmp_path):
     np.testing.assert_array_equal(np.asarray(loaded.batch.conds.field.viscous[1]), CURL)
     out = run / evaluate.EVAL_DIR
     t2 = json.loads((out / "table2.json").read_text())
+    # Every network is also tested in the mirrored frame of the paper's field (eval.frames), a column after the rest.
     assert [(r["learning"], r["test"]) for r in t2["rows"]] == [
-        (c, t) for c in ("none", "curl") for t in ("none", "viscous", "curl")
+        (c, t) for c in ("none", "curl") for t in ("none", "viscous", "curl", "viscous_mirror")
     ]
     claims = json.loads((out / "claims.json").read_text())
     cells = claims["recipes"][0]["cells"]
     assert ("curl", "curl") in {(c["learning"], c["test"]) for c in cells}
+    mirrored = claims["frames"]["viscous_mirror"]["recipes"][0]["cells"]  # the mirrored field as the paper's column
+    assert {(c["learning"], c["test"]) for c in mirrored} == {(c["learning"], c["test"]) for c in cells}
     assert all(c["paper"] is None for c in cells if "curl" in (c["learning"], c["test"]))
     assert "| curl → curl |" in (out / "table2.md").read_text()
     for name in ("fig4.png", "fig5.png", "learning_curves.png", "impedance.png"):

@@ -10,7 +10,7 @@ import pytest
 from reach_jax import evaluate
 from reach_jax.agent import network
 from reach_jax.config import Config, condition
-from reach_jax.evaluate import episodes, impedance
+from reach_jax.evaluate import episodes, frames, impedance
 from reach_jax.physics import arm
 
 CFG = Config()
@@ -129,7 +129,7 @@ def test_measure_recovers_the_controller_along_its_own_movements():
     )
     gains = impedance.measure(reaching_policy, params, masks, ep, traj, starts, targets, CFG)
     stride, steps = CFG.eval.impedance_pair_stride, CFG.eval.impedance_max_steps
-    assert gains["damping"].shape == (1, 2, len(starts[::stride]), steps, 2, 2)
+    assert gains["damping"].shape == (1, len(frames.test_columns(CFG)), len(starts[::stride]), steps, 2, 2)
     valid = gains["valid"]
     acted = np.arange(steps) < np.asarray(ep.steps)[:, :, ::stride, None]
     assert valid.sum() > 1000 and np.all(valid <= acted) and not acted.all()  # only states before the goal

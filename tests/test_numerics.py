@@ -168,8 +168,10 @@ def test_kinematics_match_oracle():
     np.testing.assert_allclose(got_ik, thetas, atol=1e-10)  # IK inverts FK on the theta2 in (0, pi) branch
 
 
-def test_elbow_stop_and_limits_match_oracle():
-    stop = CFG.arm.theta2_stop
+@pytest.mark.parametrize("one_link", [True, False])
+def test_elbow_stop_and_limits_match_oracle(one_link):
+    cfg = dataclasses.replace(CFG.arm, one_link_stop=one_link)
+    stop = cfg.theta2_stop
     states = np.array(
         [
             [0.5, stop + 0.01, 0.3, 2.0],  # past the stop, moving outward: clamped, omega2 -> 0
@@ -182,21 +184,30 @@ def test_elbow_stop_and_limits_match_oracle():
             [np.pi / 2, 1.0, 0.0, 0.0],
         ]
     )
-    stop_j = jax.jit(jax.vmap(lambda s: arm.elbow_stop(s, CFG.arm)))
-    out_j = jax.jit(jax.vmap(lambda s: arm.is_out(s, CFG.arm)))
-    want = np.array([reference.elbow_stop(s, CFG.arm) for s in states])
-    np.testing.assert_array_equal(np.asarray(stop_j(states)), want)  # pure selections: exact
-    np.testing.assert_array_equal(np.asarray(out_j(states)), [reference.is_out(s, CFG.arm) for s in states])
+    stop_j = jax.jit(jax.vmap(lambda s: arm.elbow_stop(s, cfg)))
+    out_j = jax.jit(jax.vmap(lambda s: arm.is_out(s, cfg)))
+    want = np.array([reference.elbow_stop(s, cfg) for s in states])
+    # The clamp is pure selections, exact; the one link's impact moves omega2's momentum to omega1.
+    np.testing.assert_allclose(np.asarray(stop_j(states)), want, rtol=0 if not one_link else RTOL, atol=0)
+    np.testing.assert_array_equal(np.asarray(out_j(states)), [reference.is_out(s, cfg) for s in states])
     assert want[0, 1] == stop and want[0, 3] == 0.0 and want[1, 3] == -1.0  # the oracle itself obeys model §1
+    assert (want[0, 2] != 0.3) == one_link and want[1, 2] == 0.3
 
-    # A full step that drives the elbow into the stop: RK4 then clamp, on both sides.
-    tau = np.array([0.0, CFG.arm.tau_max[1]])
-    start = np.array([0.6, stop - 0.02, 0.0, 3.0])
+    # Full steps into, on and off the stop: an impact, a step held on it (the elbow torque presses), a release.
     null = ConditionConfig()
-    step_j = jax.jit(lambda s: arm.step(s, jnp.asarray(tau), fields.make_field(null), jnp.zeros(2), CFG.arm))
-    want_step = reference.arm_step(start, tau, null, np.zeros(2), CFG.arm)
-    assert want_step[1] == stop  # the case really hits the stop
-    np.testing.assert_allclose(np.asarray(step_j(start)), want_step, rtol=RTOL, atol=ATOL)
+    step_j = jax.jit(lambda s, t: arm.step(s, t, fields.make_field(null), jnp.zeros(2), cfg))
+    cases = [
+        ([0.6, stop - 0.02, 0.0, 3.0], [0.0, cfg.tau_max[1]]),
+        ([0.6, stop, 0.4, 0.0], [1.0, cfg.tau_max[1]]),
+        ([0.6, stop, 0.4, 0.0], [1.0, -cfg.tau_max[1]]),
+    ]
+    for start, tau in cases:
+        start, tau = np.array(start), np.array(tau)
+        want_step = reference.arm_step(start, tau, null, np.zeros(2), cfg)
+        np.testing.assert_allclose(np.asarray(step_j(start, tau)), want_step, rtol=RTOL, atol=ATOL)
+    assert reference.arm_step(*map(np.array, cases[0]), null, np.zeros(2), cfg)[1] == stop  # really hits the stop
+    held = reference.held_on_stop(np.array(cases[1][0]), np.array(cases[1][1]), null, np.zeros(2), cfg)
+    assert held == one_link  # the oracle holds it only under the one-link rule
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -700,7 +711,7 @@ EXPLORATION_FORMS = {
 # constant 2 trials) from a start below the gate's 0.6, so that it is closed in the first trial, opens after
 # failures and closes again after a clean success; N_max from clean successes only; the actor's signal at half its
 # size; the actor's targets within +-0.003 (its outputs reach about 0.004 in these 200 steps). An early, fast
-# drift (from 0.4 s, 4 mm a step) makes drift-aided successes within 200 steps; seeds 4 and 5 then also end trials
+# drift (from 0.4 s, 4 mm a step) makes drift-aided successes within 200 steps; seeds 6 and 7 then also end trials
 # at each of the goal, a limit and the cap.
 LEVERS = {
     "drift_gate": 0.6,
@@ -718,7 +729,7 @@ EQ2_WHITE = compat.CHANGED_DEFAULTS[9]["learner"]
 
 @pytest.mark.parametrize(
     ("forms", "task_forms", "seeds"),
-    [(EQ2_WHITE, {}, ROLLOUT_SEEDS), (EXPLORATION_FORMS, {}, ROLLOUT_SEEDS), (LEVERS, LEVERS_TASK, (4, 5))],
+    [(EQ2_WHITE, {}, ROLLOUT_SEEDS), (EXPLORATION_FORMS, {}, (1, 2)), (LEVERS, LEVERS_TASK, (6, 7))],
     ids=["eq2-white-noise", "exploration-forms", "drift-and-actor-levers"],
 )
 def test_rollout_replays_in_oracle(forms, task_forms, seeds):
@@ -731,7 +742,7 @@ def test_rollout_replays_in_oracle(forms, task_forms, seeds):
     hyper = default_hyper(cfg)
     h = {name: float(v) for name, v in hyper._asdict().items()}
     trace = make_trace(cfg, ROLLOUT_STEPS)  # compiled once, run for each seed
-    seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0, "catch": 0, "frozen": 0}
+    seen = {"goal": 0, "out": 0, "cap": 0, "drift": 0, "catch": 0, "frozen": 0, "on the elbow stop": 0}
     gated = {"closed past the drift onset": 0, "drift-aided goal": 0}
     onset = round(cfg.task.drift_after / cfg.arm.dt)
     for seed in seeds:
@@ -765,6 +776,7 @@ def test_rollout_replays_in_oracle(forms, task_forms, seeds):
             want = np.array([getattr(r, field) for r in recs])
             np.testing.assert_array_equal(getattr(infos, field), want, err_msg=name)
             seen[name] += int(want.sum())
+        seen["on the elbow stop"] += int(np.sum(infos.arm[:, 1] >= cfg.arm.theta2_stop))  # held there as one link
         # Continuous paths: per-step float64 discrepancies (~1e-15) are carried by the arm and the learning
         # over 200 steps; the damped arm grows them by far less than 1e5 in 4 s, so 1e-9 is a safe bound,
         # while any modelling difference moves them by 1e-6 or more within one step.

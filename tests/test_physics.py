@@ -53,7 +53,9 @@ def _energy_run(cfg: ArmConfig, duration: float):
 
 def test_kinetic_energy_conserved_without_damping():
     duration = 1.0  # [s], 50 steps at the paper's dt
-    free = dataclasses.replace(ArmConfig(), joint_viscosity=(0.0, 0.0))
+    # RK4 alone, the free equations: some of these paths fold the elbow past 180 degrees, where the one-link stop
+    # would hold it (its own tests are below).
+    free = dataclasses.replace(ArmConfig(), joint_viscosity=(0.0, 0.0), one_link_stop=False)
     half = dataclasses.replace(free, dt=free.dt / 2)
     states = _states(0)
     energy, omega_max = (np.asarray(a) for a in _energy_run(free, duration)(states))
@@ -134,3 +136,75 @@ def test_viscous_field_power():
         assert joint_power == pytest.approx(hand_power, rel=1e-8, abs=1e-9)
         # And the model's own hand velocity is the same xdot.
         np.testing.assert_allclose(np.asarray(arm.hand_velocity(jnp.asarray(state), cfg)), xdot, rtol=1e-8, atol=1e-9)
+
+
+# The elbow on its stop (model §1): the paper's "fixed at 180 degree ... as one link".
+STOP = ArmConfig().theta2_stop
+NULL = ConditionConfig()
+
+
+def _step(state, tau, cfg: ArmConfig, field: ConditionConfig = NULL) -> np.ndarray:
+    return np.asarray(arm.step(jnp.asarray(state), jnp.asarray(tau), fields.make_field(field), jnp.zeros(2), cfg))
+
+
+def test_on_its_stop_the_arm_turns_as_one_link_with_the_folded_inertia():
+    cfg = ArmConfig()
+    m1, m2 = cfg.mass
+    l1, l2 = cfg.length
+    # Folded at 180 degrees link 2 lies back along link 1, its centre l1 - l2/2 from the shoulder.
+    inertia = m1 * l1**2 / 3 + m2 * l2**2 / 12 + m2 * (l1 - l2 / 2) ** 2
+    assert inertia == pytest.approx(0.12)  # [kg m^2], by hand for Table 1
+    b1, tau1, w0 = cfg.joint_viscosity[0], 1.0, 0.5
+    start, tau = np.array([0.7, STOP, w0, 0.0]), np.array([tau1, 2.0])  # the elbow torque presses into the stop
+    moved = _step(start, tau, cfg)
+    assert moved[1] == STOP and moved[3] == 0.0  # held: the elbow neither moves nor gains speed
+    # I w' = tau1 - b1 w: w(t) = tau1/b1 + (w0 - tau1/b1) exp(-b1 t / I); theta follows by integration.
+    decay = np.exp(-b1 * cfg.dt / inertia)
+    w = tau1 / b1 + (w0 - tau1 / b1) * decay
+    theta = 0.7 + tau1 / b1 * cfg.dt + (w0 - tau1 / b1) * inertia / b1 * (1 - decay)
+    # RK4's one-step error on this linear equation: (h lambda)^5 / 5! of the decaying part, h lambda = b1 dt / I.
+    err = (b1 * cfg.dt / inertia) ** 5 / 120 * abs(w0 - tau1 / b1)
+    np.testing.assert_allclose(moved[[0, 2]], [theta, w], rtol=0, atol=1.5 * err)
+    # The clamp of config versions 1-12 lets the elbow torque's reaction turn the shoulder too (0.82 against 0.63
+    # rad/s here), as if the elbow were free.
+    clamped = _step(start, tau, dataclasses.replace(cfg, one_link_stop=False))
+    assert abs(clamped[2] - w) > 0.1
+
+
+def test_the_stop_does_no_work_on_a_held_arm():
+    # No joint friction and no shoulder torque: the folded arm spins on at constant kinetic energy while the
+    # elbow torque presses it into the stop, which gives that torque back.
+    cfg = dataclasses.replace(ArmConfig(), joint_viscosity=(0.0, 0.0))
+    state, energies = np.array([0.3, STOP, 1.5, 0.0]), []
+    for _ in range(40):
+        state = _step(state, [0.0, 2.5], cfg)
+        energies.append(float(arm.kinetic_energy(jnp.asarray(state), cfg)))
+        assert state[1] == STOP and state[3] == 0.0
+    np.testing.assert_allclose(energies, energies[0], rtol=1e-12)
+    assert energies[0] == pytest.approx(0.5 * 0.12 * 1.5**2)
+
+
+def test_an_impact_on_the_stop_keeps_the_momentum_about_the_shoulder_and_loses_energy():
+    cfg = ArmConfig()
+    past = np.array([0.4, STOP + 0.01, 0.2, 3.0])  # a free step carried the elbow past the stop, still opening
+    at_stop = jnp.asarray([0.4, STOP])
+
+    def momentum(s):  # conjugate to theta1: M11 w1 + M12 w2, at the stop
+        m = np.asarray(arm.mass_matrix(at_stop, cfg))
+        return m[0, 0] * s[2] + m[0, 1] * s[3]
+
+    def energy(s):
+        return float(arm.kinetic_energy(jnp.asarray([s[0], STOP, s[2], s[3]]), cfg))
+
+    after = np.asarray(arm.elbow_stop(jnp.asarray(past), cfg))
+    assert after[1] == STOP and after[3] == 0.0
+    assert momentum(after) == pytest.approx(momentum(past), rel=1e-12)
+    assert energy(after) < energy(past)  # an inelastic impact
+    # The clamp dropped omega2's share of that momentum: the shoulder kept its speed.
+    clamped = np.asarray(arm.elbow_stop(jnp.asarray(past), dataclasses.replace(cfg, one_link_stop=False)))
+    assert clamped[2] == past[2] and momentum(clamped) != pytest.approx(momentum(past), rel=1e-3)
+
+
+def test_an_elbow_torque_that_pulls_back_releases_the_stop():
+    moved = _step([0.7, STOP, 0.5, 0.0], [1.0, -2.0], ArmConfig())
+    assert moved[1] < STOP and moved[3] < 0.0

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -31,6 +31,8 @@ ADDED_CONFIG_FIELDS = {
         "claims": {"collapse_success": 0.5, "collapse_trials": 10_000},
         "train": {"actor_target_bound_grid": []},
     },
+    # The elbow stop trained as the clamp before version 13; every run is tested in both frames of the field.
+    13: {"arm": {"one_link_stop": False}, "eval": {"frames": ["viscous", "viscous_mirror"]}},
 }
 
 # The constant-exploration recipe (versions 1-8 and 10-11) in the fields that versions 9 and 12 changed.
@@ -54,7 +56,8 @@ _CONSTANT_EXPLORATION = {
 # default recipe; version 10 put the recipe of version 8 back, since the pick collapsed learners in both runs of the
 # main command (model §11). Version 12 made the pick with eq. 2's actor targets clipped to ±0.45 the default, by
 # issue 49's adoption rule (no collapse on held-out seeds, studies/collapse/verdict.md). The pick without the clip is
-# `recipes/round4_pick.json`; the recipe of versions 10-11 is `recipes/constant_exploration.json`.
+# `recipes/round4_pick.json`; the recipe of versions 10-11 is `recipes/constant_exploration.json`. Version 13 made
+# the elbow stop the paper's one link (model §1); a version-1 config trained with the clamp.
 CHANGED_DEFAULTS = {
     9: _CONSTANT_EXPLORATION,
     10: {
@@ -72,6 +75,7 @@ CHANGED_DEFAULTS = {
         "task": {"max_trial_time": 4.0},
     },
     12: {**_CONSTANT_EXPLORATION, "learner": {**_CONSTANT_EXPLORATION["learner"], "actor_target_bound": 0.0}},
+    13: {"arm": {"one_link_stop": False}},
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change

@@ -39,7 +39,7 @@ def _check_type(name: str, value, default):
         ok = isinstance(value, (int, float)) and math.isfinite(value)
     elif isinstance(default, tuple):
         # Grids and the condition list have free length and a fixed element type; other tuples match the default.
-        named = name.endswith(("conditions", "protocols"))  # train.conditions, train.protocols, eval.test_conditions
+        named = name.endswith(("conditions", "protocols", "frames"))  # lists of names, e.g. eval.test_conditions
         free_length = named or name.endswith("grid")
         ok = isinstance(value, tuple) and (free_length or len(value) == len(default))
         if ok and free_length:
@@ -178,6 +178,7 @@ def from_dict(data: dict) -> Config:
         raise ValueError(f"{printable(sorted(data)[0])}: unknown field")
     _check_learner(sections["learner"])
     _check_names("eval.test_conditions", sections["eval"].test_conditions, conditions)
+    _check_names("eval.frames", sections["eval"].frames, conditions)
     cfg = Config(**sections, conditions=conditions, protocols=protocols)
     _check_protocols(cfg)
     _check_train(cfg)

@@ -29,15 +29,19 @@ class ConditionConfig:
     past_inputs: bool = True  # False withholds the 60 one-step-before inputs (the no-past ablation)
 
 
+# The paper loads B of Shadmehr & Mussa-Ivaldi 1994 without saying in which (x, y) of its arm (model §6): "viscous"
+# reads it in our shoulder frame, x right and y forward; "viscous_mirror" with y the other way (a sensor's rows run
+# down, or a left arm mirrors x), B' = S B S with S = diag(1, -1): the same field mirrored.
 PAPER_CONDITIONS = (
     ConditionConfig("none"),
-    ConditionConfig("viscous", viscous=((-10.1, -11.2), (-11.2, 11.1))),  # B of Shadmehr & Mussa-Ivaldi 1994
+    ConditionConfig("viscous", viscous=((-10.1, -11.2), (-11.2, 11.1))),  # B [N s/m], x right, y forward
     ConditionConfig("random", random=(8.0, 8.0)),  # Fx, Fy ~ U(-8, 8) N per trial, section 4.3
     ConditionConfig("random_nopast", random=(8.0, 8.0), past_inputs=False),  # section 4.3, without past inputs
+    ConditionConfig("viscous_mirror", viscous=((-10.1, 11.2), (11.2, 11.1))),  # B' [N s/m], y mirrored
 )
 
 
-CONDITIONS = tuple(c.name for c in PAPER_CONDITIONS)  # Table 2 rows
+CONDITIONS = tuple(c.name for c in PAPER_CONDITIONS[:4])  # Table 2 rows: the paper's learning conditions
 
 
 @dataclass(frozen=True)

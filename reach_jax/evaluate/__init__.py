@@ -23,6 +23,7 @@ runs side by side, `python -m reach_jax.evaluate.compare RUN...`). Fig. 4 moveme
 two of the centres of the four corner cells of the sensor, all 12 ordered pairs (`paper_figures`).
 """
 
+from reach_jax.evaluate.figure_files import FIGURE_DIGESTS
 from reach_jax.evaluate.lattice import (
     count,
     lattice_points,
@@ -47,7 +48,6 @@ from reach_jax.evaluate.movement import (
 from reach_jax.evaluate.pulls import aftereffect, line_deviation, pool_aftereffect, pull_vectors
 from reach_jax.evaluate.run import (
     EVAL_DIR,
-    FIGURE_DIGESTS,
     RESULT_FILES,
     FigureData,
     Results,

@@ -1,8 +1,10 @@
-"""Runs side by side: one row per recipe of each evaluated run, read from its `eval/claims.json`.
+"""Runs side by side: one row per frame of the field and recipe of each evaluated run, from its `eval/claims.json`.
 
     python -m reach_jax.evaluate.compare RUN_DIR [RUN_DIR ...] [--json FILE]
 
-A row holds the recipe in words (`config.hyper.describe`), its networks per condition, the verdict of each claim,
+A row holds the frame it judges (the condition that stands for the paper's field, `frames`; "–" for an evaluation
+made before frames, which judged "viscous"), the recipe in words (`config.hyper.describe`), its networks per
+condition, the verdict of each claim,
 the Table-2 cells near the paper's, the learners that stayed at the whole field late in training, the networks that
 collapsed (`collapse`), the unexpected field's cell (no-field networks tested in the viscous field) and the learned
 hand damping along the field's unstable axis without the field, per learning condition. Nothing is recomputed: the
@@ -28,9 +30,10 @@ SHORT = {"holds": "holds", "holds in part": "part", "does not hold": "no"}  # a 
 
 
 def recipe_rows(run_dir: Path) -> list[dict]:
-    """One record per recipe of an evaluated run; raises FileNotFoundError without `eval/claims.json`.
+    """One record per frame and recipe of an evaluated run; raises FileNotFoundError without `eval/claims.json`.
 
-    A record holds the run, the recipe's index and words, `networks`, `chunk`, `verdicts` (claim number ->
+    A record holds the run, the `frame` (None before frames), the recipe's index and words, `networks`, `chunk`,
+    `verdicts` (claim number ->
     verdict), `cells_near` of the `cells` the paper has, `stable` of `judged` learners (None: none judged yet),
     `collapsed` (the collapsed networks' names, `collapse.names`; "" for none, None where unknown),
     `none_viscous` (mean success and out per network, fractions) and `damping` (learning condition -> mean damping
@@ -41,6 +44,14 @@ def recipe_rows(run_dir: Path) -> list[dict]:
     """
     data = json.loads((Path(run_dir) / CLAIMS).read_text())
     rows = []
+    for frame, decided in {data.get("frame"): data, **data.get("frames", {})}.items():
+        rows += _frame_rows(run_dir, frame, {**decided, "chunk": data["chunk"]})
+    return rows
+
+
+def _frame_rows(run_dir: Path, frame: str | None, data: dict) -> list[dict]:
+    """`recipe_rows` of one frame's decided recipes (`data`, with the evaluated chunk)."""
+    rows = []
     collapsed = collapsed_of(Path(run_dir), data)
     for k, recipe in enumerate(data["recipes"]):
         judged = [p for p in recipe["curriculum"]["learners"] if p["tail_chunks"]]
@@ -49,6 +60,7 @@ def recipe_rows(run_dir: Path) -> list[dict]:
         rows.append(
             {
                 "run": str(run_dir),
+                "frame": frame,
                 "recipe": k,
                 "words": hyper.describe(recipe["hypers"]),
                 "networks": recipe["networks_per_condition"],
@@ -85,16 +97,17 @@ def collapsed_of(run_dir: Path, claims: dict) -> list[dict] | None:
 def markdown(rows: list[dict]) -> str:
     """The records of `recipe_rows` as one Markdown table, with a line that says how to read it."""
     lines = [
+        "Frame: the condition that stands for the paper's field (– before frames: viscous). "
         "Claims: holds / part (holds in part) / no. Near: Table-2 cells within the target. Stable: of the learners "
         "in their last 20% of trials, those that stayed at the whole field. Collapsed: networks below 50% success in "
         "their own condition's test (the null field's for random forces). none → viscous: mean success / out per "
-        "network (paper 55% / 45%). Damping: mean learned hand damping along the field's unstable axis, no field, "
-        "N s/m, per learning condition (none / viscous / random / random_nopast; the field's eigenvalue there is "
-        "+15.9).",
+        "network in the frame's field (paper 55% / 45%). Damping: mean learned hand damping along the frame's unstable "
+        "axis, no field, N s/m, per learning condition (none / the frame's field / random / random_nopast; the field's "
+        "eigenvalue there is +15.9).",
         "",
-        "| run | recipe | exploration | seeds | chunk | 1 | 2 | 3 | 4 | 5 | near | stable | collapsed | none → viscous "
-        "| damping |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| run | frame | recipe | exploration | seeds | chunk | 1 | 2 | 3 | 4 | 5 | near | stable | collapsed "
+        "| none → viscous | damping |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         verdicts = " | ".join(SHORT[r["verdicts"][k]] if k in r["verdicts"] else "–" for k in range(1, 6))
@@ -104,8 +117,8 @@ def markdown(rows: list[dict]) -> str:
         collapsed = "–" if r["collapsed"] is None else r["collapsed"] or "none"
         damping = " / ".join(f"{r['damping'][c]:.0f}" for c in CONDITIONS if c in r["damping"])
         lines.append(
-            f"| `{r['run']}` | {r['recipe']} | {r['words']} | {r['networks']} | {r['chunk']} | {verdicts} | "
-            f"{r['cells_near']}/{r['cells']} | {stable} | {collapsed} | {field} | {damping} |"
+            f"| `{r['run']}` | {r['frame'] or '–'} | {r['recipe']} | {r['words']} | {r['networks']} | {r['chunk']} | "
+            f"{verdicts} | {r['cells_near']}/{r['cells']} | {stable} | {collapsed} | {field} | {damping} |"
         )
     return "\n".join(lines) + "\n"
 

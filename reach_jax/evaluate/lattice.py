@@ -29,6 +29,7 @@ from reach_jax.config import Config, hyper
 from reach_jax.config.paper import PAPER_NETWORKS, PAPER_TABLE2
 from reach_jax.env import task
 from reach_jax.env.environment import OUTCOME_NAMES, SUCCESS
+from reach_jax.evaluate import frames
 from reach_jax.evaluate.report import collapsed_words, interval_text
 from reach_jax.physics import fields, sensor
 
@@ -59,8 +60,9 @@ def test_pairs(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_fields(cfg: Config) -> fields.Field:
-    """The hand-force fields of cfg.eval.test_conditions, stacked along a leading axis."""
-    return jax.tree.map(lambda *f: jnp.stack(f), *(task.make_condition(n, cfg).field for n in cfg.eval.test_conditions))
+    """The hand-force fields of the test columns (`frames.test_columns`), stacked along a leading axis."""
+    conditions = (task.make_condition(n, cfg) for n in frames.test_columns(cfg))
+    return jax.tree.map(lambda *f: jnp.stack(f), *(c.field for c in conditions))
 
 
 def trial_times(outcome: np.ndarray, steps: np.ndarray, cfg: Config) -> np.ndarray:
@@ -103,7 +105,7 @@ def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int
     """Table 2 as a JSON-ready dict: counts summed over each learning condition's networks, and per network.
 
     Args:
-      outcome: (N, C, 1040) outcome codes, networks in `learners` order, tests in cfg.eval.test_conditions order.
+      outcome: (N, C, 1040) outcome codes, networks in `learners` order, tests in `frames.test_columns` order.
       steps: (N, C, 1040) episode lengths [steps].
       learners: (learning condition, seed index) per network.
       recipe_of: (N,) recipe index per network (`recipe_index`).
@@ -117,17 +119,17 @@ def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int
     present = learning_conditions(learners, cfg)
     for learning in present:
         nets = [i for i, (name, _) in enumerate(learners) if name == learning]
-        for j, test in enumerate(cfg.eval.test_conditions):
+        for j, test in enumerate(frames.test_columns(cfg)):
             cell = count(outcome[nets, j], steps[nets, j], cfg)
             rows.append({"learning": learning, "test": test, "networks": len(nets), **cell})
     for k in sorted(set(recipe_of)):
         for learning in present:
             nets = [i for i, (name, s) in enumerate(learners) if name == learning and s < 2 and recipe_of[i] == k]
-            for j, test in enumerate(cfg.eval.test_conditions):
+            for j, test in enumerate(frames.test_columns(cfg)):
                 cell = count(outcome[nets, j], steps[nets, j], cfg)
                 first_two.append({"learning": learning, "test": test, "recipe": k, "networks": len(nets), **cell})
     for i, (learning, seed) in enumerate(learners):
-        for j, test in enumerate(cfg.eval.test_conditions):
+        for j, test in enumerate(frames.test_columns(cfg)):
             cell = count(outcome[i, j], steps[i, j], cfg)
             per_network.append(
                 {"learner": i, "learning": learning, "seed": seed, "recipe": recipe_of[i], "test": test, **cell}
@@ -148,8 +150,9 @@ def _recipe_name(hypers: dict) -> str:
     return ", ".join(f"{k} {v:g}" for k, v in hypers.items())
 
 
-def _table2_row(cell: dict, first: dict | None, few: int) -> str:
-    """One Table-2 cell as a Markdown row: our intervals, our networks 0-1 summed (`first`), the paper's, near it."""
+def _table2_row(cell: dict, first: dict | None, few: int, frame: str | None) -> str:
+    """One Table-2 cell as a Markdown row: our intervals, our networks 0-1 summed (`first`), the paper's, near it;
+    the cell's conditions named as in the run (`frames.shown`)."""
     ours01 = _cell(first["success"], first["out"], first["fail"], first["mean_time_s"]) if first else "–"
     key = (cell["learning"], cell["test"])
     paper = _cell(*PAPER_TABLE2[key]) if key in PAPER_TABLE2 else "–"
@@ -157,7 +160,8 @@ def _table2_row(cell: dict, first: dict | None, few: int) -> str:
     if cell["near_paper"]:
         near = " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
     return (
-        f"| {cell['learning']} → {cell['test']} | {interval_text(cell['success'], few, 100.0)} | "
+        f"| {frames.shown(cell['learning'], frame)} → {frames.shown(cell['test'], frame)} | "
+        f"{interval_text(cell['success'], few, 100.0)} | "
         f"{interval_text(cell['out'], few, 100.0)} | {interval_text(cell['mean_time_s'], few, 1.0, 2)} | "
         f"{ours01} | {paper} | {near} |"
     )
@@ -171,6 +175,19 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
       recipes: each recipe's verdicts (`verdicts.decide`), with its cells' intervals.
       source: the run and chunk named in the title.
     """
+    return frames_markdown({None: (table, recipes)}, source)
+
+
+def frames_markdown(judged: dict, source: str) -> str:
+    """Table 2 in Markdown for each frame of the paper's field (`frames`) and recipe: mean per network with its
+    interval, our networks 0-1 summed, the paper's.
+
+    Args:
+      judged: {frame: (the `table2` results in its view (`frames.table_view`), each recipe's verdicts)}, the main
+        frame first; frame None for a run without frames.
+      source: the run and chunk named in the title.
+    """
+    table, recipes = next(iter(judged.values()))
     level = recipes[0]["level"] if recipes else 0.95
     lines = [
         f"# Table 2 — {source}",
@@ -183,23 +200,28 @@ def table2_markdown(table: dict, recipes: list[dict], source: str) -> str:
         ' networks. "near paper": success and out within the target\'s percentage points, time within its'
         " fraction (S / O / T).",
     ]
-    sums = {(r["learning"], r["test"], r["recipe"]): r for r in table["first_two"]}
     few = recipes[0].get("informative_networks", 0) if recipes else 0
     if recipes and recipes[0]["networks_per_condition"] < few:
         lines[-1] += (
             f" With {recipes[0]['networks_per_condition']} networks a condition (fewer than {few}) an interval says"
             " little, so each network's value stands beside the mean instead."
         )
-    for k, recipe in enumerate(recipes):
-        lines += [
-            "",
-            f"## Recipe {k}: {_recipe_name(recipe['hypers'])} "
-            f"({recipe['networks_per_condition']} networks per condition)",
-            "",
-            "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        lines += [_table2_row(cell, sums.get((cell["learning"], cell["test"], k)), few) for cell in recipe["cells"]]
-        if "collapsed" in recipe:
-            lines += ["", collapsed_words(recipe)]
+    if len(judged) > 1:
+        lines[-1] += " " + frames.FRAMES_WORDS
+    for frame, (table, recipes) in judged.items():
+        sums = {(r["learning"], r["test"], r["recipe"]): r for r in table["first_two"]}
+        for k, recipe in enumerate(recipes):
+            lines += [
+                "",
+                f"## {frames.heading(frame)}Recipe {k}: {_recipe_name(recipe['hypers'])} "
+                f"({recipe['networks_per_condition']} networks per condition)",
+                "",
+                "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper |",
+                "|---|---|---|---|---|---|---|",
+            ]
+            lines += [
+                _table2_row(cell, sums.get((cell["learning"], cell["test"], k)), few, frame) for cell in recipe["cells"]
+            ]
+            if "collapsed" in recipe:
+                lines += ["", collapsed_words(recipe)]
     return "\n".join(lines) + "\n"

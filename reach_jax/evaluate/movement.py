@@ -16,7 +16,7 @@ import numpy as np
 from reach_jax.config import Config
 from reach_jax.env import task, trial_log
 from reach_jax.env.environment import FAIL, SUCCESS
-from reach_jax.evaluate import lattice
+from reach_jax.evaluate import frames, lattice
 from reach_jax.evaluate.episodes import Episode, n_steps
 
 
@@ -166,7 +166,7 @@ def quality(ep: Episode, learners, starts: np.ndarray, targets: np.ndarray, cfg:
     cells = []
     for learning in lattice.learning_conditions(learners, cfg):
         nets = [i for i, (name, _) in enumerate(learners) if name == learning]
-        for j, test in enumerate(cfg.eval.test_conditions):
+        for j, test in enumerate(frames.test_columns(cfg)):
             sub = Episode(*(np.concatenate([np.asarray(a)[i, j] for i in nets]) for a in ep))
             reps = len(nets)
             cells.append(

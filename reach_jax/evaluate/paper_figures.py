@@ -55,7 +55,7 @@ def corner_episodes(params, masks, cfg: Config) -> episodes.Episode:
     Args:
       params: the networks' parameters, leading network axis N (`store.run_dir.load_params`).
       masks: (N, 125) input masks of their learning conditions.
-      cfg: the run's config; cfg.eval.test_conditions are the C tests.
+      cfg: the run's config; its test columns (`frames.test_columns`) are the C tests.
 
     Returns:
       NumPy episodes, leading axes (N, C, 12).

@@ -5,7 +5,7 @@ Units as in `claims`: success and out in percentage points, times [s], damping [
 
 from __future__ import annotations
 
-from reach_jax.evaluate import collapse
+from reach_jax.evaluate import collapse, frames
 
 
 def paper_cells(cells: list[dict]) -> tuple[list[dict], list[dict]]:
@@ -68,12 +68,24 @@ def _paper_fmt(name: str, value: float) -> str:
 
 
 def claims_markdown(result: dict, source: str) -> str:
-    """claims.json as Markdown: per recipe, the five claims with their numbers and verdicts, then the checks."""
+    """claims.json as Markdown: per frame of the field and recipe, the five claims with their numbers and verdicts,
+    then the checks."""
     lines = [f"# The paper's claims — {source}", ""]
-    for k, recipe in enumerate(result["recipes"]):
+    judged = {result.get("frame"): result, **result.get("frames", {})}
+    if len(judged) > 1:
+        lines += [frames.FRAMES_WORDS, ""]
+    for frame, decided in judged.items():
+        lines += _recipe_sections(decided["recipes"], frame)
+    return "\n".join(lines)
+
+
+def _recipe_sections(recipes: list[dict], frame: str | None) -> list[str]:
+    """One frame's claims, a section per recipe."""
+    lines = []
+    for k, recipe in enumerate(recipes):
         name = ", ".join(f"{key} {v:g}" for key, v in recipe["hypers"].items())
         lines += [
-            f"## Recipe {k}: {name} ({recipe['networks_per_condition']} networks per condition)",
+            f"## {frames.heading(frame)}Recipe {k}: {name} ({recipe['networks_per_condition']} networks per condition)",
             "",
             f"Intervals are {recipe['level']:.0%} t-intervals over networks, on the logit scale for success and out"
             " rates and on the log scale for times and ratios; differences are paired by seed. " + _few_words(recipe),
@@ -84,10 +96,10 @@ def claims_markdown(result: dict, source: str) -> str:
             "",
             *_checks(recipe),
             "",
-            *_damping_table(recipe),
+            *_damping_table(recipe, frame),
             "",
         ]
-    return "\n".join(lines)
+    return lines
 
 
 def _claim_row(c: dict, few: int) -> str:
@@ -142,7 +154,7 @@ def collapsed_words(recipe: dict) -> str:
     return f"**Collapsed networks** ({rule}): {collapse.names(recipe['collapsed'])}."
 
 
-def _damping_table(recipe: dict) -> list[str]:
+def _damping_table(recipe: dict, frame: str | None) -> list[str]:
     """The learned hand damping per cell along the field's axes, as a Markdown table with its lead-in."""
     few = recipe.get("informative_networks", 0)
     names = ("damping_unstable", "damping_stable", "passive_damping_unstable")
@@ -154,7 +166,9 @@ def _damping_table(recipe: dict) -> list[str]:
         "| learning → test | unstable axis | stable axis | passive, unstable axis |",
         "|---|---|---|---|",
         *(
-            f"| {cell['learning']} → {cell['test']} | " + " | ".join(interval_text(cell[n], few) for n in names) + " |"
+            f"| {frames.shown(cell['learning'], frame)} → {frames.shown(cell['test'], frame)} | "
+            + " | ".join(interval_text(cell[n], few) for n in names)
+            + " |"
             for cell in recipe["impedance"]
         ),
     ]

@@ -1,13 +1,13 @@
 """Evaluating a run: the test episodes of every network, their results and the files of eval/; [m], [s], [deg].
 
 `evaluate_run` measures (`Results`), `write_results` writes; `evaluate` does both, `redecide` decides the claims
-again from the written files.
+again from the written files. The after-effect, the impedance along the field's axes and the claims are judged
+once per frame of the paper's field (`frames`): each file holds the first frame's, and the others' under "frames".
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 from pathlib import Path
 
@@ -15,9 +15,20 @@ import jax
 import numpy as np
 
 from reach_jax.config import Config
-from reach_jax.env import task
-from reach_jax.evaluate import adaptation, figures, impedance, lattice, movement, paper_figures, pulls, report, verdicts
+from reach_jax.evaluate import (
+    adaptation,
+    figures,
+    frames,
+    impedance,
+    lattice,
+    movement,
+    paper_figures,
+    pulls,
+    report,
+    verdicts,
+)
 from reach_jax.evaluate.episodes import Episode, Trajectory, network_policy, run_episodes
+from reach_jax.evaluate.figure_files import Figures
 from reach_jax.evaluate.paper_figures import FIG4_PANELS, corner_pairs
 from reach_jax.store import files
 from reach_jax.store import run_dir as run_dir_io
@@ -25,15 +36,13 @@ from reach_jax.store.checkpoint import CheckpointError
 
 EVAL_DIR = "eval"
 RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "claims")  # each written as NAME.json
-# {PNG name: digest of the data it draws}, so that a figure whose data has not changed is neither drawn nor written
-FIGURE_DIGESTS = "figures.json"
 
 
 @dataclasses.dataclass(frozen=True)
 class FigureData:
     """The arrays that the figures draw (`figures.fig4`, `fig5`, `impedance`), beside the JSON results."""
 
-    panels: dict  # {Fig. 4 letter: Episode over the M corner movements} for the panels with a network
+    panels: dict  # {frame: {Fig. 4 letter: Episode over the M corner movements}} for the panels with a network
     starts: np.ndarray  # (M, 2) corner movements' starts [m]
     targets: np.ndarray  # (M, 2) their targets [m]
     start_corner: np.ndarray  # (M,) start corner index into panels.CORNER_NAMES
@@ -62,14 +71,14 @@ def run_tests(
       cfg: model config.
 
     Returns:
-      (lattice episodes (N, C, P), their trajectories, corner episodes (N, C, M)), NumPy.
+      (lattice episodes (N, C, P), their trajectories, corner episodes (N, C, M)), NumPy; C `frames.test_columns`.
     """
     ep, traj = jax.device_get(
         run_episodes(
             policy,
             params,
             masks,
-            lattice.test_fields(cfg),
+            lattice.test_fields(cfg),  # every column of `frames.test_columns`
             np.concatenate([lattice_ends[0], corner_ends[0]]),
             np.concatenate([lattice_ends[1], corner_ends[1]]),
             cfg,
@@ -91,47 +100,43 @@ def network_index(learners: list[tuple[str, int]], recipe_of: list[int], learnin
     return None
 
 
-def fig4_panels(corners: Episode, learners, recipe_of: list[int], cfg: Config) -> dict:
-    """{Fig. 4 letter: Episode over the corner movements} of recipe 0's cfg.eval.figure_seed networks."""
-    tests = cfg.eval.test_conditions
+def fig4_panels(corners: Episode, v: frames.View, cfg: Config) -> dict:
+    """{Fig. 4 letter: Episode over the corner movements} of recipe 0's cfg.eval.figure_seed networks in view `v`."""
     panels = {}
     for letter, learning, test in FIG4_PANELS:
-        i = network_index(learners, recipe_of, learning, cfg.eval.figure_seed, 0)
-        if i is not None and test in tests:
-            panels[letter] = Episode(*(a[i, tests.index(test)] for a in corners))
+        i = network_index(v.learners, v.recipe_of, learning, cfg.eval.figure_seed, 0)
+        if i is not None and test in v.tests:
+            panels[letter] = Episode(*(a[i, v.tests.index(test)] for a in corners))
     return panels
 
 
-def aftereffect_per_seed(
-    corners: Episode, corner: tuple, learners, recipe_of: list[int], n_recipes: int, field: np.ndarray, cfg: Config
-) -> list[dict]:
-    """`pulls.aftereffect` of every (recipe, seed) that has both a no-field and a viscous-field network.
+def aftereffect_per_seed(corners: Episode, corner: tuple, v: frames.View, n_recipes: int, seeds: int) -> list[dict]:
+    """`pulls.aftereffect` of every (recipe, seed) that has both a no-field and a field-trained network in view `v`.
 
     Args:
       corners: corner episodes (N, C, M).
       corner: (starts, targets, start corner index) of the M corner movements (`panels.corner_pairs`).
-      learners: (learning condition, seed index) per network.
-      recipe_of: (N,) recipe index per network.
+      v: the frame's view of the networks and test columns; its field's matrix gives the force [N s/m].
       n_recipes: number of recipes.
-      field: (2, 2) viscous field matrix [N s/m].
-      cfg: model config.
+      seeds: networks per condition and recipe.
     """
-    tests = cfg.eval.test_conditions
     per_seed = []
+    if not {"none", frames.PAPER_FIELD} <= set(v.tests):
+        return per_seed
+    off, on = v.tests.index("none"), v.tests.index(frames.PAPER_FIELD)
     for k in range(n_recipes):
-        for seed in range(cfg.train.seeds):
-            i = network_index(learners, recipe_of, "none", seed, k)
-            j = network_index(learners, recipe_of, "viscous", seed, k)
-            if i is None or j is None or not {"none", "viscous"} <= set(tests):
+        for seed in range(seeds):
+            i = network_index(v.learners, v.recipe_of, "none", seed, k)
+            j = network_index(v.learners, v.recipe_of, frames.PAPER_FIELD, seed, k)
+            if i is None or j is None:
                 continue
-            off, on = tests.index("none"), tests.index("viscous")
             hands = {
                 "a": corners.hand[i, off],
                 "b": corners.hand[i, on],
                 "c": corners.hand[j, off],
                 "d": corners.hand[j, on],
             }
-            per_seed.append({"recipe": k, "seed": seed, **pulls.aftereffect(hands, *corner, field)})
+            per_seed.append({"recipe": k, "seed": seed, **pulls.aftereffect(hands, *corner, v.field)})
     return per_seed
 
 
@@ -141,6 +146,22 @@ def aftereffect_result(per_seed: list[dict], cfg: Config) -> dict:
     if main:
         return {**main[0], "per_seed": per_seed}
     return {"error": "needs the none and viscous learning conditions at seed cfg.eval.figure_seed"}
+
+
+def judge(v: frames.View, table: dict, per_seed: list[dict], imp: dict, recipes: list[dict], metrics) -> dict:
+    """One frame's judgement: {"aftereffect", "impedance", "claims"} as the files hold them, from the whole run's
+    `table`, its impedance summary `imp` along this frame's axes and the frame's `per_seed` after-effects; the
+    claims are decided on the frame's view of the table and of the impedance."""
+    seen = {**imp, "per_network": frames.rows_view(imp["per_network"], v.frame, v.cfg)}
+    table = frames.table_view(table, v.frame, v.cfg)
+    decided = verdicts.decide(table, per_seed, seen, recipes, v.recipe_of, metrics, v.cfg)
+    return {"aftereffect": aftereffect_result(per_seed, v.cfg), "impedance": imp, "claims": {"recipes": decided}}
+
+
+def by_frame(judged: dict, key: str) -> dict:
+    """A file's record of every frame (`judge`): the first frame's at the top, the others' under "frames"."""
+    first, *others = judged
+    return {"frame": first, **judged[first][key], "frames": {f: judged[f][key] for f in others}}
 
 
 def evaluate_run(data: run_dir_io.Run) -> Results:
@@ -155,23 +176,25 @@ def evaluate_run(data: run_dir_io.Run) -> Results:
     table = lattice.table2(grid.outcome, grid.steps, data.learners, recipe_of, cfg)
     for row in table["per_network"]:
         row.update(recipes[row["recipe"]])
-    viscous = np.asarray(task.make_condition("viscous", cfg).field.viscous)  # the float32 matrix the arm felt
-    per_seed = aftereffect_per_seed(corners, corner, data.learners, recipe_of, len(recipes), viscous, cfg)
     gains = impedance.measure(policy, params, masks, grid, grid_traj, starts, targets, cfg)
-    imp = impedance.summarize(gains, data.learners, cfg.eval.test_conditions, viscous)
-    for row in imp["per_network"]:
-        row["recipe"] = recipe_of[row["learner"]]
-    decided = verdicts.decide(table, per_seed, imp, recipes, recipe_of, data.metrics, cfg)
+    judged, panels = {}, {}
+    for frame in frames.frame_list(cfg):
+        v = frames.view(frame, data.learners, recipe_of, cfg)
+        imp = impedance.summarize(gains, data.learners, frames.test_columns(cfg), v.field)
+        for row in imp["per_network"]:
+            row["recipe"] = recipe_of[row["learner"]]
+        per_seed = aftereffect_per_seed(corners, corner, v, len(recipes), cfg.train.seeds)
+        judged[frame] = judge(v, table, per_seed, imp, recipes, data.metrics)
+        panels[frame] = fig4_panels(corners, v, cfg)
     trials = np.asarray(data.batch.states.env.trials)
     results = {
         "table2": {**table, "chunk": data.chunk, "trials_per_network": [int(t) for t in trials]},
-        "aftereffect": aftereffect_result(per_seed, cfg),
+        "aftereffect": by_frame(judged, "aftereffect"),
         "quality": movement.quality(grid, data.learners, starts, targets, cfg),
-        "impedance": {**imp, "recipes": recipes, "chunk": data.chunk},
-        "claims": {"chunk": data.chunk, "trials_per_network": cfg.train.trials, "recipes": decided},
+        "impedance": {**by_frame(judged, "impedance"), "recipes": recipes, "chunk": data.chunk},
+        "claims": {"chunk": data.chunk, "trials_per_network": cfg.train.trials, **by_frame(judged, "claims")},
         "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
     }
-    panels = fig4_panels(corners, data.learners, recipe_of, cfg)
     return Results(json=results, figures=FigureData(panels, *corner, gains))
 
 
@@ -190,62 +213,31 @@ def redecide(run_dir: Path) -> dict:
             raise CheckpointError(f"{path}: missing; evaluate the run in full first")
     table, after, imp = (json.loads(path.read_text()) for path in paths)
     cfg = run_dir_io.read_config(run_dir)
-    recipe_of = list(dict(sorted({r["learner"]: r["recipe"] for r in imp["per_network"]}.items())).values())
+    afters, imps = ({r.get("frame"): r, **r.get("frames", {})} for r in (after, imp))
+    missing = [f for f in frames.frame_list(cfg) if f not in afters or f not in imps]
+    if missing:
+        raise CheckpointError(f"{paths[1]}: no frame {missing[0]} (written before frames); evaluate the run in full")
+    networks = {r["learner"]: r for r in table["per_network"]}
+    learners = [(networks[i]["learning"], networks[i]["seed"]) for i in sorted(networks)]
+    recipe_of = [networks[i]["recipe"] for i in sorted(networks)]
     metrics = run_dir_io.read_metrics(run_dir, table["chunk"])
-    decided = verdicts.decide(table, after.get("per_seed", []), imp, imp["recipes"], recipe_of, metrics, cfg)
-    result = {"chunk": table["chunk"], "trials_per_network": cfg.train.trials, "recipes": decided}
-    source = f"{run_dir} (chunk {table['chunk']})"
-    files.atomic_write_bytes(out / "claims.json", json.dumps(result, indent=2).encode())
-    files.atomic_write_bytes(out / "table2.md", lattice.table2_markdown(table, decided, source).encode())
-    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(result, source).encode())
+    judged = {}
+    for frame in frames.frame_list(cfg):
+        v = frames.view(frame, learners, recipe_of, cfg)
+        per_seed = afters[frame].get("per_seed", [])
+        judged[frame] = judge(v, table, per_seed, imps[frame], imp["recipes"], metrics)
+    result = {"chunk": table["chunk"], "trials_per_network": cfg.train.trials, **by_frame(judged, "claims")}
+    write_judgements(out, table, result, cfg, f"{run_dir} (chunk {table['chunk']})")
     return result
 
 
-def _canonical(x):
-    """x as JSON data for a digest: an array as its dtype, shape and the SHA-256 of its bytes, a dataclass (the
-    config) as its fields, a tuple (NamedTuples included) as a list."""
-    if isinstance(x, np.ndarray | np.generic | jax.Array):
-        a = np.ascontiguousarray(x)
-        return {"dtype": a.dtype.str, "shape": a.shape, "sha256": hashlib.sha256(a.tobytes()).hexdigest()}
-    if dataclasses.is_dataclass(x):
-        return _canonical(dataclasses.asdict(x))
-    if isinstance(x, dict):
-        return {str(k): _canonical(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_canonical(v) for v in x]
-    return x
-
-
-def data_digest(*data) -> str:
-    """SHA-256 of the data a figure draws (arrays, JSON-like values, the config), equal exactly when the data are."""
-    return hashlib.sha256(json.dumps(_canonical(data), sort_keys=True).encode()).hexdigest()
-
-
-class Figures:
-    """Writes the PNGs of an evaluation into a folder, each drawn only when the data it draws have changed.
-
-    FIGURE_DIGESTS in the folder keeps each PNG's data digest; a PNG whose digest matches keeps its bytes and mtime.
-    """
-
-    def __init__(self, out: Path):
-        self.out, self.path = out, out / FIGURE_DIGESTS
-        try:
-            self.stored = json.loads(self.path.read_text())
-        except (OSError, json.JSONDecodeError):
-            self.stored = {}  # none yet, or unreadable: every figure is drawn
-        self.digests: dict[str, str] = {}
-
-    def draw(self, name: str, plot, *data) -> None:
-        """Write plot(*data) (a matplotlib Figure) as `name`, unless the PNG there drew the same data."""
-        digest = self.digests[name] = data_digest(*data)
-        if self.stored.get(name) == digest and (self.out / name).is_file():
-            return
-        files.atomic_write_bytes(self.out / name, figures.png_bytes(plot(*data)))
-
-    def close(self) -> None:
-        """Write FIGURE_DIGESTS, if it changed."""
-        if self.digests != self.stored:
-            files.atomic_write_bytes(self.path, json.dumps(self.digests, indent=2, sort_keys=True).encode())
+def write_judgements(out: Path, table: dict, claims: dict, cfg: Config, source: str) -> None:
+    """Write claims.json, and table2.md and claims.md with a section for each frame."""
+    decided = {claims["frame"]: claims, **claims["frames"]}
+    files.atomic_write_bytes(out / "claims.json", json.dumps(claims, indent=2).encode())
+    seen = {f: (frames.table_view(table, f, cfg), decided[f]["recipes"]) for f in decided}
+    files.atomic_write_bytes(out / "table2.md", lattice.frames_markdown(seen, source).encode())
+    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(claims, source).encode())
 
 
 def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Path | None = None) -> Path:
@@ -256,17 +248,18 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
     cfg, res, fig = data.cfg, results.json, results.figures
     out = Path(run_dir) / EVAL_DIR if out is None else Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    for name in RESULT_FILES:
+    for name in (n for n in RESULT_FILES if n != "claims"):
         files.atomic_write_bytes(out / f"{name}.json", json.dumps(res[name], indent=2).encode())
     source = f"{run_dir} (chunk {data.chunk})"
-    recipes = res["claims"]["recipes"]
-    files.atomic_write_bytes(out / "table2.md", lattice.table2_markdown(res["table2"], recipes, source).encode())
-    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(res["claims"], source).encode())
+    write_judgements(out, res["table2"], res["claims"], cfg, source)
     files.atomic_write_bytes(out / "quality.md", movement.quality_markdown(res["quality"], source).encode())
     pngs = Figures(out)
     pngs.draw("impedance.png", figures.impedance, res["impedance"], fig.gains, data.learners, cfg)
-    pngs.draw("fig4.png", paper_figures.fig4, fig.panels, fig.starts, fig.targets, fig.start_corner, cfg)
-    pngs.draw("fig5.png", paper_figures.fig5, fig.panels, fig.start_corner, cfg)
+    first = next(iter(fig.panels))
+    for frame in fig.panels:  # the first frame's is fig4.png, another's fig4_FRAME.png
+        name = "fig4.png" if frame == first else f"fig4_{frame}.png"
+        pngs.draw(name, paper_figures.fig4, fig.panels[frame], fig.starts, fig.targets, fig.start_corner, cfg)
+    pngs.draw("fig5.png", paper_figures.fig5, fig.panels[first], fig.start_corner, cfg)
     pngs.draw("learning_curves.png", figures.learning_curves, data.metrics, cfg)
     if res["adaptation"] is not None:
         files.atomic_write_bytes(out / "adaptation.json", json.dumps(res["adaptation"], indent=2).encode())

@@ -113,35 +113,65 @@ def external_force(state: jax.Array, field: fields.Field, force: jax.Array, cfg:
     return fields.hand_force(field, hand_position(state[:2], cfg), hand_velocity(state, cfg), force)
 
 
-def dsdt(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
-    """Time derivative of the (4,) arm state under (2,) motor torques [N m] and the hand force."""
+def _derivatives(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig):
+    """The (4,) time derivative of the arm state, free and as one link (the elbow held on its stop, `dsdt`)."""
     theta, omega = state[:2], state[2:]
     hand_force = external_force(state, field, force, cfg)
     rhs = tau + fields.matvec2(jacobian(theta, cfg).T, hand_force) - velocity_torque(theta, omega, cfg)
     m = mass_matrix(theta, cfg)
     det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
     acc = jnp.array([m[1, 1] * rhs[0] - m[0, 1] * rhs[1], m[0, 0] * rhs[1] - m[1, 0] * rhs[0]]) / det
-    return jnp.concatenate([omega, acc])
+    one_link = jnp.stack([omega[0], jnp.zeros_like(omega[0]), rhs[0] / m[0, 0], jnp.zeros_like(rhs[0])])
+    return jnp.concatenate([omega, acc]), one_link
+
+
+def dsdt(state, tau, field: fields.Field, force, cfg: ArmConfig, held=False) -> jax.Array:
+    """Time derivative of the (4,) arm state under (2,) motor torques [N m] and the hand force.
+
+    With `held` (() bool) the elbow sits on its stop and the arm turns as one link about the shoulder (model §1):
+    theta2 stays, and eq. 4 with theta2'' = 0 gives theta1'' = rhs1 / M11; the stop takes eq. 5's reaction.
+    """
+    free, one_link = _derivatives(state, tau, field, force, cfg)
+    return jnp.where(held, one_link, free)
+
+
+def pressed(state: jax.Array, free: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """() bool: cfg.one_link_stop, and the elbow on its stop, not leaving it, with its free acceleration (from the
+    free derivative `free` (4,)) pressing it further: the stop then holds it for the step (model §1)."""
+    on_stop = (state[1] >= cfg.theta2_stop) & (state[3] >= 0.0) & (free[3] >= 0.0)
+    return jnp.logical_and(cfg.one_link_stop, on_stop)
 
 
 def rk4(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig) -> jax.Array:
-    """One classical RK4 step of length cfg.dt; torque held, field evaluated in every stage."""
+    """One classical RK4 step of length cfg.dt; torque held, field evaluated in every stage.
+
+    A step that starts with the elbow pressed into its stop (`pressed`) takes every stage as one link.
+    """
     dt = cfg.dt
-    k1 = dsdt(state, tau, field, force, cfg)
-    k2 = dsdt(state + 0.5 * dt * k1, tau, field, force, cfg)
-    k3 = dsdt(state + 0.5 * dt * k2, tau, field, force, cfg)
-    k4 = dsdt(state + dt * k3, tau, field, force, cfg)
+    free, one_link = _derivatives(state, tau, field, force, cfg)
+    held = pressed(state, free, cfg)
+    k1 = jnp.where(held, one_link, free)
+    k2 = dsdt(state + 0.5 * dt * k1, tau, field, force, cfg, held)
+    k3 = dsdt(state + 0.5 * dt * k2, tau, field, force, cfg, held)
+    k4 = dsdt(state + dt * k3, tau, field, force, cfg, held)
     return state + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def elbow_stop(state: jax.Array, cfg: ArmConfig) -> jax.Array:
-    """Hard stop at theta2 = cfg.theta2_stop: clamp the angle, zero any outward velocity (model §1)."""
+    """Hard stop at theta2 = cfg.theta2_stop: clamp the angle, zero any outward velocity (model §1).
+
+    With cfg.one_link_stop the impact keeps the momentum about the shoulder, M11 omega1 + M12 omega2 at the stop,
+    which the stop's impulse on the elbow cannot change: omega1 takes what omega2 loses.
+    """
     past = state[1] >= cfg.theta2_stop
     theta2 = jnp.where(past, cfg.theta2_stop, state[1])
     omega2 = jnp.where(past, jnp.minimum(state[3], 0.0), state[3])
+    m = mass_matrix(jnp.stack([state[0], theta2]), cfg)
+    kept = state[2] + m[0, 1] / m[0, 0] * (state[3] - omega2)
+    omega1 = jnp.where(jnp.logical_and(cfg.one_link_stop, past), kept, state[2])
     # Rebuilt rather than written in place: an indexed write is a scatter, which keeps XLA:CPU from compiling
     # the step loop as one kernel (`xla_options.CPU_XLA_FLAGS`).
-    return jnp.stack([state[0], theta2, state[2], omega2])
+    return jnp.stack([state[0], theta2, omega1, omega2])
 
 
 def is_out(state: jax.Array, cfg: ArmConfig) -> jax.Array:

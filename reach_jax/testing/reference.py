@@ -124,10 +124,10 @@ def hand_force(state, field: ConditionConfig, force, cfg: ArmConfig) -> np.ndarr
     return b @ hand_velocity(state, cfg) + spring + np.asarray(field.constant) + np.asarray(force, dtype=np.float64)
 
 
-def dsdt(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
-    """Eq. 4-5 solved for the accelerations.
+def dsdt(state, tau, field, force, cfg: ArmConfig, held: bool = False) -> np.ndarray:
+    """Eq. 4-5 solved for the accelerations; held on the elbow stop, eq. 4 alone with theta2'' = 0 (one link).
 
-    Args: state (4,), tau (2,) [N m], field a ConditionConfig, force (2,) [N].
+    Args: state (4,), tau (2,) [N m], field a ConditionConfig, force (2,) [N], held: the stop holds the elbow.
     Returns: (4,) [rad/s, rad/s^2].
     """
     m2, l1, _, s2, _, _ = _links(cfg)
@@ -140,27 +140,43 @@ def dsdt(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
     # The hand force acts on the joints through the transposed Jacobian (virtual work).
     ext = jacobian(state[:2], cfg).T @ hand_force(state, field, force, cfg)
     rhs = np.array([tau[0] + ext[0] - v1, tau[1] + ext[1] - v2])
-    acc = np.linalg.solve(inertia_matrix(state[:2], cfg), rhs)
+    a = inertia_matrix(state[:2], cfg)
+    if held:  # the stop supplies whatever elbow torque keeps theta2'' = 0
+        return np.array([w1, 0.0, rhs[0] / a[0, 0], 0.0])
+    acc = np.linalg.solve(a, rhs)
     return np.array([w1, w2, acc[0], acc[1]])
 
 
+def held_on_stop(state, tau, field, force, cfg: ArmConfig) -> bool:
+    """Whether the stop holds the elbow over the next step (model §1): cfg.one_link_stop, the elbow on its stop and
+    not leaving it, and its free acceleration pressing it further.
+
+    Args: as `dsdt`.
+    """
+    if not cfg.one_link_stop or state[1] < cfg.theta2_stop or state[3] < 0.0:
+        return False
+    return bool(dsdt(state, tau, field, force, cfg)[3] >= 0.0)
+
+
 def rk4(state, tau, field, force, cfg: ArmConfig) -> np.ndarray:
-    """Classical RK4 over cfg.dt, torque held, force re-evaluated per stage.
+    """Classical RK4 over cfg.dt, torque held, force re-evaluated per stage, every stage one link when held.
 
     Args: as `dsdt`.
     Returns: (4,) state.
     """
     h = cfg.dt
     s = np.asarray(state, dtype=np.float64)
-    k1 = dsdt(s, tau, field, force, cfg)
-    k2 = dsdt(s + (h / 2) * k1, tau, field, force, cfg)
-    k3 = dsdt(s + (h / 2) * k2, tau, field, force, cfg)
-    k4 = dsdt(s + h * k3, tau, field, force, cfg)
+    held = held_on_stop(s, tau, field, force, cfg)
+    k1 = dsdt(s, tau, field, force, cfg, held)
+    k2 = dsdt(s + (h / 2) * k1, tau, field, force, cfg, held)
+    k3 = dsdt(s + (h / 2) * k2, tau, field, force, cfg, held)
+    k4 = dsdt(s + h * k3, tau, field, force, cfg, held)
     return s + (h / 6) * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
 def elbow_stop(state, cfg: ArmConfig) -> np.ndarray:
-    """Hard stop at theta2 = cfg.theta2_stop (model §1 choice).
+    """Hard stop at theta2 = cfg.theta2_stop (model §1 choice); with cfg.one_link_stop an impact keeps the momentum
+    about the shoulder, a11 w1 + a12 w2 at the stop.
 
     Args: state (4,).
     Returns: (4,) state.
@@ -169,6 +185,9 @@ def elbow_stop(state, cfg: ArmConfig) -> np.ndarray:
     if s[1] >= cfg.theta2_stop:
         s[1] = cfg.theta2_stop
         if s[3] > 0.0:
+            if cfg.one_link_stop:  # the stop's impulse acts on the elbow alone: a11 w1' = a11 w1 + a12 w2
+                a = inertia_matrix(s[:2], cfg)
+                s[2] += a[0, 1] / a[0, 0] * s[3]
             s[3] = 0.0
     return s
 

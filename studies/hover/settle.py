@@ -93,7 +93,7 @@ def _test_cfg(cfg):
     deterministic, and the policy never sees the time (`_check_against_eval` compares the two)."""
     ev = cfg.eval
     short = dataclasses.replace(
-        ev, test_conditions=("none",), max_time=ev.impedance_max_steps * cfg.arm.dt, impedance_pair_stride=1
+        ev, test_conditions=("none",), frames=(), max_time=ev.impedance_max_steps * cfg.arm.dt, impedance_pair_stride=1
     )
     # The training section does not reach the test episodes; a common one lets runs share their compiled tests.
     return dataclasses.replace(cfg, eval=short, train=type(cfg.train)()), ev.impedance_pair_stride
