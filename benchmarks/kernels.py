@@ -1,101 +1,88 @@
-"""Kernels that XLA runs for one training step: the instructions of the compiled step loop's body, by kind.
+"""What the training step loop compiles to on XLA:CPU: one kernel or a call per fusion, and how long compiling takes.
 
-`python benchmarks/kernels.py [--learners N] [--json PATH]`
+`python benchmarks/kernels.py [--learners N ...] [--json PATH]`
 
-XLA:CPU runs each fusion, copy, dot or concatenation of the step loop's body as a separate kernel, one after
-another, so at small batches their number sets the step's latency (README "Performance"). The script compiles a
-chunk with XLA's optimised HLO dumped to a temporary folder, takes the largest loop body of the chunk (the
-step; the loops of the random draws are smaller) and counts its instructions, leaving out those that run no
-kernel (parameters, tuples and their elements, constants, bitcasts). Writes
-benchmarks/results/kernels-<UTC time>.json unless --json names one.
+For each batch size (on one device) the script compiles a chunk of 128 steps, with and without the per-trial log,
+and reads its optimised HLO (`reach_jax.testing.hlo`): how many while loops run as one kernel ("small calls",
+`xla_options.CPU_XLA_FLAGS`), whether every instruction of the step (the arm's sines among them) runs inside one,
+what the one-kernel loops hold by opcode, and what stays outside them (with the per-trial log, the block loop
+that writes the log, whose scatter keeps it out). Before the one-kernel step each fusion of the step loop's body
+was a separate call, about 160 a step (`kernels-20261124*.json`). Writes benchmarks/results/kernels-<UTC time>.json
+unless --json names one.
 """
 
 from __future__ import annotations
 
 import argparse
-import collections
-import json
-import os
-import re
+import dataclasses
 import sys
-import tempfile
+import time
 from pathlib import Path
 
-from reach_jax.engine import chunk as chunk_lib
 from reach_jax.engine import distribute
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import throughput  # noqa: E402  (the sibling benchmark's batches, results folder and code version)
 
-NO_KERNEL = ("parameter", "tuple", "get-tuple-element", "constant", "bitcast")  # instructions that launch nothing
 STEPS = 128  # steps of the compiled chunk: two draw blocks, so the step loop is a loop
 
 
 def parse(argv=None) -> argparse.Namespace:
     """Command line."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--learners", type=int, default=1, help="batch size, on one device (default 1)")
+    p.add_argument("--learners", type=int, nargs="+", default=[1, 8], help="batch sizes, one device (default 1 8)")
     p.add_argument("--json", type=Path, help="write the results here (default: a new file in benchmarks/results)")
     return p.parse_args(argv)
 
 
-def computations(hlo: str) -> dict[str, list[str]]:
-    """The instruction lines of each computation of an HLO text module, by name."""
-    found, current = {}, None
-    for line in hlo.splitlines():
-        head = re.match(r"^(?:ENTRY )?%(\S+) \(.*\{$", line)
-        if head:
-            current = found.setdefault(head.group(1), [])
-        elif line.strip() == "}":
-            current = None
-        elif current is not None:
-            current.append(line)
-    return found
+def report(n_learners: int, every: int) -> dict:
+    """What a chunk of n_learners with a trial log every `every` trials (0: none) compiles to, and its compile time."""
+    import jax
+    import jax.numpy as jnp
 
+    from reach_jax.config import Config
+    from reach_jax.config.schema import DEFAULT_SPEED
+    from reach_jax.engine.chunk import chunk_body
+    from reach_jax.testing import hlo
 
-def step_kernels(hlo: str) -> collections.Counter:
-    """Kernel-launching instructions of the largest while-loop body in `hlo`, by opcode."""
-    comps = computations(hlo)
-    bodies = [
-        m.group(1) for lines in comps.values() for line in lines for m in [re.search(r"body=%([^,\s]+)", line)] if m
-    ]
-    body = max(bodies, key=lambda name: len(comps[name]))
-    kinds = collections.Counter()
-    for line in comps[body]:
-        op = re.search(r"=\s*\S+\s+([a-z][a-z-]*)\(", line)
-        if op and op.group(1) not in NO_KERNEL:
-            kinds[op.group(1)] += 1
-    return kinds
+    cfg = Config()
+    cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, trial_log_every=every))
+    learners = throughput.batch_of(n_learners, cfg)
+    budget = jnp.asarray(2**31 - 1, jnp.int32)
+    lowered = jax.jit(chunk_body(cfg, STEPS, DEFAULT_SPEED)).lower(
+        learners.states, learners.plans, learners.hypers, budget
+    )
+    t0 = time.perf_counter()
+    text = lowered.compile().as_text()
+    compile_s = time.perf_counter() - t0
+    inside, outside = hlo.count(text, "sine")
+    return {
+        "learners": n_learners,
+        "trial_log_every": every,
+        "compile_s": compile_s,
+        "one_kernel_loops": text.count("xla_cpu_small_call"),
+        "step_in_one_kernel": inside > 0 and outside == 0,
+        "inside_by_opcode": dict(hlo.opcodes(text, inside=True).most_common()),
+        "outside_by_opcode": dict(hlo.opcodes(text, inside=False).most_common()),
+    }
 
 
 def main(argv=None) -> int:
-    """Compile with the HLO dumped, count, print, write the JSON."""
+    """Compile, read, print, write the JSON."""
     args = parse(argv)
-    with tempfile.TemporaryDirectory() as dump:
-        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} --xla_dump_to={dump} --xla_dump_hlo_as_text"
-        distribute.setup_backend(1)
-        import jax
-        import jax.numpy as jnp
+    distribute.setup_backend(1)
+    import jax
 
-        from reach_jax.config import Config
-
-        cfg = Config()
-        learners = throughput.batch_of(args.learners, cfg)
-        chunk = chunk_lib.make_chunk(cfg, STEPS, jax.devices()[:1])
-        budget = jnp.asarray(2**31 - 1, jnp.int32)
-        jax.block_until_ready(chunk(learners.states, learners.plans, learners.hypers, budget))
-        modules = list(Path(dump).glob("*jit_chunk*cpu_after_optimizations.txt"))
-        kinds = step_kernels(max(modules, key=lambda p: p.stat().st_size).read_text())
-    result = {
-        "kernels_per_step": sum(kinds.values()),
-        "by_kind": dict(kinds.most_common()),
-        "learners": args.learners,
-        "code": throughput.code_version(),
-        "jax": jax.__version__,
-        "backend": jax.default_backend(),
-    }
-    print(json.dumps(result, indent=2))
+    rows = [report(n, every) for n in args.learners for every in (0, 1)]
+    for r in rows:
+        print(
+            f"{r['learners']} learners, trial log {'on' if r['trial_log_every'] else 'off'}: "
+            f"{r['one_kernel_loops']} one-kernel loops, step in one kernel: {r['step_in_one_kernel']}, "
+            f"{sum(r['inside_by_opcode'].values())} instructions inside, outside: {r['outside_by_opcode']}, "
+            f"compiled in {r['compile_s']:.1f} s"
+        )
+    result = {"rows": rows, "code": throughput.code_version(), "jax": jax.__version__, "backend": jax.default_backend()}
     throughput.write_result(result, "kernels", args.json)
     return 0
 

@@ -8,7 +8,6 @@ vmap) silently brings back a kernel call per fusion. These tests read the optimi
 from __future__ import annotations
 
 import dataclasses
-import re
 
 import jax
 import jax.numpy as jnp
@@ -19,45 +18,9 @@ from reach_jax.config import Config
 from reach_jax.config.schema import DEFAULT_SPEED
 from reach_jax.engine import batch, xla_options
 from reach_jax.engine.chunk import chunk_body, make_chunk
+from reach_jax.testing import hlo
 
 pytestmark = pytest.mark.skipif(jax.default_backend() != "cpu", reason="an XLA:CPU compiler pass")
-
-
-def computations(hlo: str) -> dict[str, list[str]]:
-    """The instruction lines of each computation of an HLO text module, by name."""
-    found, current = {}, None
-    for line in hlo.splitlines():
-        head = re.match(r"^(?:ENTRY )?%(\S+) \(.*\{$", line)
-        if head:
-            current = found.setdefault(head.group(1), [])
-        elif line.strip() == "}":
-            current = None
-        elif current is not None:
-            current.append(line)
-    return found
-
-
-def called(lines: list[str]) -> set[str]:
-    """The computations that these instructions call, run as loop bodies or fuse."""
-    return {m for line in lines for m in re.findall(r"(?:to_apply|body|condition|calls)=%([\w.\-]+)", line)}
-
-
-def unhoisted(hlo: str, op: str) -> tuple[int, int]:
-    """(instructions `op` inside one-kernel calls, instructions `op` elsewhere) of an optimised HLO module."""
-    comps = computations(hlo)
-    inside, todo = (
-        set(),
-        [c for lines in comps.values() for line in lines if "xla_cpu_small_call" in line for c in called([line])],
-    )
-    while todo:
-        name = todo.pop()
-        if name not in inside:
-            inside.add(name)
-            todo.extend(called(comps.get(name, [])))
-    count = {True: 0, False: 0}
-    for name, lines in comps.items():
-        count[name in inside] += sum(f" {op}(" in line for line in lines)
-    return count[True], count[False]
 
 
 def compiled_chunk(every: int) -> str:
@@ -80,10 +43,10 @@ def test_the_one_kernel_option_is_set():
 @pytest.mark.parametrize("every", [0, 1])
 def test_the_step_loop_is_one_kernel(every):
     # The arm's RK4 takes sines and cosines every step: every one of them runs inside a one-kernel call.
-    hlo = compiled_chunk(every)
-    inside, outside = unhoisted(hlo, "sine")
+    text = compiled_chunk(every)
+    inside, outside = hlo.count(text, "sine")
     assert inside > 0 and outside == 0, (inside, outside)
-    assert unhoisted(hlo, "scatter")[0] == 0 and unhoisted(hlo, "dot")[0] == 0
+    assert hlo.count(text, "scatter")[0] == 0 and hlo.count(text, "dot")[0] == 0
 
 
 def test_the_check_sees_a_scatter_keep_a_loop_out():
@@ -98,8 +61,8 @@ def test_the_check_sees_a_scatter_keep_a_loop_out():
         return jax.lax.scan(lambda x, _: (jnp.sin(x) + 1.0, None), x, None, length=50)[0]
 
     args = (jnp.ones((4, 8)), jnp.arange(4))
-    assert unhoisted(jax.jit(loop).lower(*args).compile().as_text(), "sine") == (0, 1)
-    assert unhoisted(jax.jit(clean).lower(*args).compile().as_text(), "sine") == (1, 0)
+    assert hlo.count(jax.jit(loop).lower(*args).compile().as_text(), "sine") == (0, 1)
+    assert hlo.count(jax.jit(clean).lower(*args).compile().as_text(), "sine") == (1, 0)
 
 
 def test_a_learner_rounds_the_same_alone_as_in_a_batch():

@@ -8,6 +8,8 @@ elbow angle relative to link 1. All functions act on one arm; vmap them for many
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 
@@ -113,16 +115,23 @@ def external_force(state: jax.Array, field: fields.Field, force: jax.Array, cfg:
     return fields.hand_force(field, hand_position(state[:2], cfg), hand_velocity(state, cfg), force)
 
 
-def _derivatives(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig):
-    """The (4,) time derivative of the arm state, free and as one link (the elbow held on its stop, `dsdt`)."""
+def _rhs_and_mass(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array, cfg: ArmConfig):
+    """Eq. 4-5 as M(theta) theta'' = rhs: ((2,) rhs [N m], (2, 2) M [kg m^2])."""
     theta, omega = state[:2], state[2:]
     hand_force = external_force(state, field, force, cfg)
     rhs = tau + fields.matvec2(jacobian(theta, cfg).T, hand_force) - velocity_torque(theta, omega, cfg)
-    m = mass_matrix(theta, cfg)
-    det = m[0, 0] * m[1, 1] - m[0, 1] * m[1, 0]
-    acc = jnp.array([m[1, 1] * rhs[0] - m[0, 1] * rhs[1], m[0, 0] * rhs[1] - m[1, 0] * rhs[0]]) / det
-    one_link = jnp.stack([omega[0], jnp.zeros_like(omega[0]), rhs[0] / m[0, 0], jnp.zeros_like(rhs[0])])
-    return jnp.concatenate([omega, acc]), one_link
+    return rhs, mass_matrix(theta, cfg)
+
+
+def _accelerations(rhs: jax.Array, m: jax.Array, held) -> jax.Array:
+    """(2,) joint accelerations: M^-1 rhs, or with the elbow `held` on its stop eq. 4 alone, (rhs1 / M11, 0).
+
+    Held, M is taken as [[M11, 0], [0, 1]] and rhs2 as 0, so that one formula serves both.
+    """
+    m01, m10 = jnp.where(held, 0.0, m[0, 1]), jnp.where(held, 0.0, m[1, 0])
+    m11, r1 = jnp.where(held, 1.0, m[1, 1]), jnp.where(held, 0.0, rhs[1])
+    det = m[0, 0] * m11 - m01 * m10
+    return jnp.array([m11 * rhs[0] - m01 * r1, m[0, 0] * r1 - m10 * rhs[0]]) / det
 
 
 def dsdt(state, tau, field: fields.Field, force, cfg: ArmConfig, held=False) -> jax.Array:
@@ -131,14 +140,14 @@ def dsdt(state, tau, field: fields.Field, force, cfg: ArmConfig, held=False) -> 
     With `held` (() bool) the elbow sits on its stop and the arm turns as one link about the shoulder (model §1):
     theta2 stays, and eq. 4 with theta2'' = 0 gives theta1'' = rhs1 / M11; the stop takes eq. 5's reaction.
     """
-    free, one_link = _derivatives(state, tau, field, force, cfg)
-    return jnp.where(held, one_link, free)
+    rhs, m = _rhs_and_mass(state, tau, field, force, cfg)
+    return jnp.concatenate([state[2:], _accelerations(rhs, m, held)])
 
 
-def pressed(state: jax.Array, free: jax.Array, cfg: ArmConfig) -> jax.Array:
-    """() bool: cfg.one_link_stop, and the elbow on its stop, not leaving it, with its free acceleration (from the
-    free derivative `free` (4,)) pressing it further: the stop then holds it for the step (model §1)."""
-    on_stop = (state[1] >= cfg.theta2_stop) & (state[3] >= 0.0) & (free[3] >= 0.0)
+def pressed(state: jax.Array, free_acc: jax.Array, cfg: ArmConfig) -> jax.Array:
+    """() bool: cfg.one_link_stop, and the elbow on its stop, not leaving it, with its free acceleration (the second
+    of `free_acc` (2,)) pressing it further: the stop then holds it for the step (model §1)."""
+    on_stop = (state[1] >= cfg.theta2_stop) & (state[3] >= 0.0) & (free_acc[1] >= 0.0)
     return jnp.logical_and(cfg.one_link_stop, on_stop)
 
 
@@ -148,13 +157,22 @@ def rk4(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array,
     A step that starts with the elbow pressed into its stop (`pressed`) takes every stage as one link.
     """
     dt = cfg.dt
-    free, one_link = _derivatives(state, tau, field, force, cfg)
+    rhs, m = _rhs_and_mass(state, tau, field, force, cfg)
+    free = _accelerations(rhs, m, False)
     held = pressed(state, free, cfg)
-    k1 = jnp.where(held, one_link, free)
+    k1 = jnp.concatenate([state[2:], jnp.where(held, _accelerations(rhs, m, True), free)])
     k2 = dsdt(state + 0.5 * dt * k1, tau, field, force, cfg, held)
     k3 = dsdt(state + 0.5 * dt * k2, tau, field, force, cfg, held)
     k4 = dsdt(state + dt * k3, tau, field, force, cfg, held)
     return state + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+@functools.cache
+def _stop_share(cfg: ArmConfig) -> float:
+    """M12 / M11 at the stop (theta2 = cfg.theta2_stop): the share of omega2 that an impact passes to omega1."""
+    with jax.ensure_compile_time_eval():  # a constant of the compiled step, not a cosine in every step
+        m = mass_matrix(jnp.array([0.0, cfg.theta2_stop]), cfg)
+        return float(m[0, 1] / m[0, 0])
 
 
 def elbow_stop(state: jax.Array, cfg: ArmConfig) -> jax.Array:
@@ -166,8 +184,7 @@ def elbow_stop(state: jax.Array, cfg: ArmConfig) -> jax.Array:
     past = state[1] >= cfg.theta2_stop
     theta2 = jnp.where(past, cfg.theta2_stop, state[1])
     omega2 = jnp.where(past, jnp.minimum(state[3], 0.0), state[3])
-    m = mass_matrix(jnp.stack([state[0], theta2]), cfg)
-    kept = state[2] + m[0, 1] / m[0, 0] * (state[3] - omega2)
+    kept = state[2] + _stop_share(cfg) * (state[3] - omega2)
     omega1 = jnp.where(jnp.logical_and(cfg.one_link_stop, past), kept, state[2])
     # Rebuilt rather than written in place: an indexed write is a scatter, which keeps XLA:CPU from compiling
     # the step loop as one kernel (`xla_options.CPU_XLA_FLAGS`).
