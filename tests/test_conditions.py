@@ -79,6 +79,7 @@ def test_the_mirrored_field_is_the_paper_field_with_y_reversed():
         (["--set", "conditions.curl.constant=[NaN, 0]"], "conditions.curl.constant"),
         (["--set", "conditions.curl.spring=1"], "conditions.curl.spring: unknown field"),
         (["--set", 'eval.test_conditions=["none", "twist"]'], "eval.test_conditions"),
+        (["--set", 'eval.frames=["viscous", "twist"]'], "eval.frames"),
         (["--set", "conditions.a,b.constant=[1, 1]"], "without commas or spaces"),
     ],
 )

@@ -3,12 +3,10 @@ leaves out the networks and tests of the other frames."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 
-from reach_jax.config import Config, condition
+from reach_jax.config import Config, condition, from_partial
 from reach_jax.evaluate import frames
 
 CFG = Config()
@@ -26,7 +24,7 @@ def pairs(rows: list[dict]) -> set[tuple[str, str]]:
 
 def test_every_network_is_tested_in_every_frame():
     assert frames.test_columns(CFG) == TESTS
-    no_frames = dataclasses.replace(CFG, eval=dataclasses.replace(CFG.eval, frames=()))
+    no_frames = from_partial({"eval": {"frames": []}})  # a config may judge its run without frames
     assert frames.test_columns(no_frames) == ("none", "viscous") and frames.frame_list(no_frames) == (None,)
 
 

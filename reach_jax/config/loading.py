@@ -178,7 +178,8 @@ def from_dict(data: dict) -> Config:
         raise ValueError(f"{printable(sorted(data)[0])}: unknown field")
     _check_learner(sections["learner"])
     _check_names("eval.test_conditions", sections["eval"].test_conditions, conditions)
-    _check_names("eval.frames", sections["eval"].frames, conditions)
+    if sections["eval"].frames:  # none: the run is judged as it is, by eval.test_conditions alone
+        _check_names("eval.frames", sections["eval"].frames, conditions)
     cfg = Config(**sections, conditions=conditions, protocols=protocols)
     _check_protocols(cfg)
     _check_train(cfg)
