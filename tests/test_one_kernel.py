@@ -18,6 +18,7 @@ from reach_jax.config import Config
 from reach_jax.config.schema import DEFAULT_SPEED
 from reach_jax.engine import batch, xla_options
 from reach_jax.engine.chunk import chunk_body, make_chunk
+from reach_jax.physics import arm
 from reach_jax.testing import hlo
 
 pytestmark = pytest.mark.skipif(jax.default_backend() != "cpu", reason="an XLA:CPU compiler pass")
@@ -79,3 +80,17 @@ def test_a_learner_rounds_the_same_alone_as_in_a_batch():
         mine = chunk(jax.tree.map(jnp.copy, alone.states), alone.plans, alone.hypers, budget)[0]
         for a, b in zip(jax.tree.leaves(together), jax.tree.leaves(mine), strict=True):
             np.testing.assert_array_equal(np.asarray(a)[i], np.asarray(b)[0])
+
+
+def test_the_stop_share_rounds_as_the_program_that_uses_it():
+    # The impact's share M12/M11 is a constant computed while tracing; cached once under jax.enable_x64 (the physics
+    # tests), it carried float64 rounding into every float32 program traced after, and training in a test process
+    # left the bits of the same run trained by the command line.
+    cfg = Config().arm
+    state = jnp.array([0.3, cfg.theta2_stop + 0.01, 0.2, 1.7], jnp.float32)
+    with jax.enable_x64(True):
+        arm.elbow_stop(state.astype(jnp.float64), cfg)
+    m = np.asarray(arm.mass_matrix(jnp.array([0.0, cfg.theta2_stop], jnp.float32), cfg))
+    assert m.dtype == np.float32
+    want = np.float32(0.2) + np.float32(m[0, 1] / m[0, 0]) * np.float32(1.7)
+    assert np.asarray(arm.elbow_stop(state, cfg))[2] == want

@@ -397,15 +397,20 @@ def test_padded_hidden_units_stay_inert_and_change_nothing():
     speeds = [DEFAULT_SPEED] + [
         Speed(**{name: value}) for name, value in (("hidden_pad", 1), ("draw_block", 7), ("donate", False))
     ]
-    runs = [
-        make_chunk(cfg, 700, speed=speed)(jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, budget)[0]
-        for speed in [*speeds, Speed(sparse_layer1=False)]
-    ]
+
+    def run(speed, steps=700):
+        return make_chunk(cfg, steps, speed=speed)(
+            jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, budget
+        )[0]
+
+    runs = [run(speed) for speed in speeds]
     assert network.dense_layers(runs[0].agent.params)[0][0].shape == (2, n_inputs(cfg), 30)
-    for speed, other in zip(speeds[1:], runs[1:], strict=False):
+    for speed, other in zip(speeds[1:], runs[1:], strict=True):
         chex.assert_trees_all_equal(runs[0], other, custom_message=str(speed))
     # The dense layer 1 sums the same non-zero terms in another order: equal to float32 rounding, not bit for bit.
-    chex.assert_trees_all_close(runs[0], runs[-1], rtol=1e-4, atol=1e-5)
+    # Learning amplifies a rounding difference from step to step (at most 2.4e-7 after 50 steps, 2e-5 after 700), so
+    # the two are compared after 50 steps, by which every layer's weights have moved by 1e-4 or more.
+    chex.assert_trees_all_close(run(DEFAULT_SPEED, 50), run(Speed(sparse_layer1=False), 50), rtol=1e-6, atol=1e-6)
 
 
 def test_cli_rejects_bad_input_in_one_line_and_writes_nothing(tmp_path, capsys):

@@ -8,8 +8,6 @@ elbow angle relative to link 1. All functions act on one arm; vmap them for many
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 
@@ -167,9 +165,10 @@ def rk4(state: jax.Array, tau: jax.Array, field: fields.Field, force: jax.Array,
     return state + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
 
 
-@functools.cache
 def _stop_share(cfg: ArmConfig) -> float:
     """M12 / M11 at the stop (theta2 = cfg.theta2_stop): the share of omega2 that an impact passes to omega1."""
+    # Computed at each trace, not cached: a value cached under jax.enable_x64 would carry float64 rounding into
+    # a later float32 program.
     with jax.ensure_compile_time_eval():  # a constant of the compiled step, not a cosine in every step
         m = mass_matrix(jnp.array([0.0, cfg.theta2_stop]), cfg)
         return float(m[0, 1] / m[0, 0])
