@@ -115,6 +115,7 @@ def run_records(run: Path) -> list[dict]:
             "run": str(run),
             "learner": i,
             "seed": data.learners[i][1],
+            "recipe_index": recipe_of[i],
             "recipe": recipes[recipe_of[i]],
             "turn_deg": phis.tolist(),
             "axis_deg": [pushing_axis(turned(b, p)) for p in phis],
@@ -214,15 +215,15 @@ def markdown(result: dict, command: str) -> str:
 def figure(records: list[dict], field_value: float, axes_deg: dict):
     """One polar panel per network: damping in every direction (both halves), the field's eigenvalue, the out share
     at each pushing axis (colour), the two frames' pushing axes."""
-    n = len(records)
+    n = len(records) + 1  # a panel per network, and the pooled scatter, two panels wide
     cols = 8
-    rows = -(-n // cols)
+    rows = -(-(n + 1) // cols)
     fig = plt.figure(figsize=(2.3 * cols, 2.5 * rows + 0.8))
     theta = np.radians(np.concatenate([PROFILE, PROFILE + 180, [360]]))
-    scale = max(max(r["damping"]) for r in records)
     for k, rec in enumerate(records):
         ax = fig.add_subplot(rows, cols, k + 1, projection="polar")
         prof = np.asarray(rec["damping"])
+        scale = max(float(prof.max()), 2 * field_value)  # each panel its own radius; the field's circle stays visible
         ax.plot(theta, np.concatenate([prof, prof, prof[:1]]), color="0.2", lw=1)
         pas = np.asarray(rec["passive_damping"])
         ax.plot(theta, np.concatenate([pas, pas, pas[:1]]), color="0.6", lw=0.6)
@@ -246,7 +247,28 @@ def figure(records: list[dict], field_value: float, axes_deg: dict):
         ax.set_yticklabels([])
         ax.set_xticks(np.radians([0, 90, 180, 270]))
         ax.set_xticklabels(["x", "y", "", ""], fontsize=6)
-        ax.set_title(f"{Path(rec['run']).name} s{rec['seed']}", fontsize=7)
+        ax.set_title(f"{Path(rec['run']).name} r{rec['recipe_index']} s{rec['seed']}", fontsize=7)
+    ax = fig.add_subplot(rows, cols, (n, n + 1))
+    steps = [i for i, t in enumerate(records[0]["turn_deg"]) if t in STEP_TURNS]
+    ax.scatter(
+        np.concatenate([along_axis(r)[steps] for r in records]),
+        100 * np.concatenate([np.asarray(r["out"])[steps] for r in records]),
+        s=4,
+        color="tab:red",
+        alpha=0.4,
+        label="every network and 15° turn",
+    )
+    turn = records[0]["turn_deg"]
+    mirror = next(k for k, t in enumerate(turn) if t not in STEP_TURNS)  # `turns`
+    for name, k, color in (("as applied", turn.index(0), "tab:green"), ("mirrored", mirror, "tab:purple")):
+        damping, out = [along_axis(r)[k] for r in records], [100 * r["out"][k] for r in records]
+        ax.scatter(damping, out, s=9, color=color, label=name)
+    ax.axvline(field_value, color="tab:blue", ls="--", lw=0.8)
+    ax.legend(fontsize=6)
+    ax.set_xlim(0, None)
+    ax.set_xlabel("damping along the pushing axis [N s/m]", fontsize=7)
+    ax.set_ylabel("out [%]", fontsize=7)
+    ax.tick_params(labelsize=6)
     fig.suptitle(
         "No-field networks: hand damping in every direction (black; grey: passive), the field's +15.9 N s/m (dashed),"
         " out share when the field's pushing axis lies at each dot (white 0 – red 100%); green: the pushing axis as"
@@ -262,7 +284,13 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
     p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--replot", action="store_true", help="only draw OUT.png again from OUT.json")
     args = p.parse_args(argv)
+    if args.replot:
+        done = json.loads(args.out.with_suffix(".json").read_text())
+        fig = figure(done["records"], done["summary"]["field_eigenvalue"], done["axes_deg"])
+        fig.savefig(args.out.with_suffix(".png"), dpi=110)
+        return 0
     distribute.setup_backend(1)
     records = [r for run in args.runs for r in run_records(run)]
     cfg = run_dir_io.read_config(args.runs[0])
