@@ -65,8 +65,8 @@ def ir_counts(ll: str) -> dict:
     }
 
 
-def ir_report(n_learners: int) -> dict:
-    """`ir_counts` of the one-kernel step loop of a chunk of n_learners without a trial log, on one device."""
+def lowered_chunk(n_learners: int, every: int):
+    """A lowered chunk of STEPS steps of n_learners with a trial log every `every` trials (0: none), on one device."""
     import jax
     import jax.numpy as jnp
 
@@ -75,13 +75,17 @@ def ir_report(n_learners: int) -> dict:
     from reach_jax.engine.chunk import chunk_body
 
     cfg = Config()
+    cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, trial_log_every=every))
     learners = throughput.batch_of(n_learners, cfg)
     budget = jnp.asarray(2**31 - 1, jnp.int32)
-    lowered = jax.jit(chunk_body(cfg, STEPS, DEFAULT_SPEED)).lower(
-        learners.states, learners.plans, learners.hypers, budget
-    )
+    chunk = jax.jit(chunk_body(cfg, STEPS, DEFAULT_SPEED))
+    return chunk.lower(learners.states, learners.plans, learners.hypers, budget)
+
+
+def ir_report(n_learners: int) -> dict:
+    """`ir_counts` of the one-kernel step loop of a chunk of n_learners without a trial log, on one device."""
     with tempfile.TemporaryDirectory() as folder:
-        lowered.compile(compiler_options={"xla_dump_to": folder})
+        lowered_chunk(n_learners, 0).compile(compiler_options={"xla_dump_to": folder})
         # The step loop is the largest function XLA emits for the chunk (the other kernels are its set-up).
         ll = max(Path(folder).glob("*chunk*ir-with-opt.ll"), key=lambda p: p.stat().st_size)
         return {"learners": n_learners, "module": ll.name, **ir_counts(ll.read_text())}
@@ -89,21 +93,9 @@ def ir_report(n_learners: int) -> dict:
 
 def report(n_learners: int, every: int) -> dict:
     """What a chunk of n_learners with a trial log every `every` trials (0: none) compiles to, and its compile time."""
-    import jax
-    import jax.numpy as jnp
-
-    from reach_jax.config import Config
-    from reach_jax.config.schema import DEFAULT_SPEED
-    from reach_jax.engine.chunk import chunk_body
     from reach_jax.testing import hlo
 
-    cfg = Config()
-    cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, trial_log_every=every))
-    learners = throughput.batch_of(n_learners, cfg)
-    budget = jnp.asarray(2**31 - 1, jnp.int32)
-    lowered = jax.jit(chunk_body(cfg, STEPS, DEFAULT_SPEED)).lower(
-        learners.states, learners.plans, learners.hypers, budget
-    )
+    lowered = lowered_chunk(n_learners, every)
     t0 = time.perf_counter()
     text = lowered.compile().as_text()
     compile_s = time.perf_counter() - t0
