@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -60,3 +63,16 @@ def test_the_mirrored_frame_is_a_turn_of_the_field_and_the_map_tests_it(load_too
     assert orientation.pushing_axis(b) == pytest.approx(113.2, abs=0.1)
     assert orientation.pushing_axis(orientation.turned(b, mirror)) == pytest.approx(66.8, abs=0.1)
     assert orientation.pushing_axis(orientation.turned(b, 90.0)) == pytest.approx(23.2, abs=0.1)
+
+
+def test_the_committed_verdict_is_the_rule_applied_to_the_committed_runs(load_tool):
+    verdict = load_tool("studies/frame/verdict")
+    root = Path(__file__).resolve().parent.parent
+    committed = json.loads((root / "studies" / "frame" / "verdict.json").read_text())
+    runs = [root / "runs" / name for name in ("frame_default", "frame_constant")]
+    recs = [r for run in runs for r in verdict.records(run)]
+    for r in recs:
+        r["run"] = str(Path(r["run"]).relative_to(root))  # the committed file names the runs from the root
+    result = verdict.decide(recs)
+    assert json.loads(json.dumps(result)) == {k: v for k, v in committed.items() if k != "command"}
+    assert verdict.markdown(result, committed["command"]) == (root / "studies" / "frame" / "verdict.md").read_text()
