@@ -8,9 +8,11 @@ from pathlib import Path
 import pytest
 
 from reach_jax.config import (
+    CONDITIONS,
     CONFIG_VERSION,
     Config,
     LearnerConfig,
+    blocks_of,
     checked_config,
     compat,
     from_dict,
@@ -137,7 +139,7 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12 or 13, found 0"):
+    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13 or 14, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
 
 
@@ -146,8 +148,9 @@ def test_before_version_13_the_elbow_stop_is_the_clamp_and_the_evaluation_judges
     del stored["arm"]["one_link_stop"], stored["eval"]["frames"]
     cfg = from_dict(stored)
     assert cfg.arm.one_link_stop is False and Config().arm.one_link_stop is True
-    assert cfg.eval.frames == ("viscous", "viscous_mirror") == Config().eval.frames
-    assert cfg == dataclasses.replace(Config(), arm=dataclasses.replace(Config().arm, one_link_stop=False))
+    assert cfg.eval.frames == ("viscous", "viscous_mirror")  # both frames, the one as applied first
+    then = dataclasses.replace(Config().eval, frames=("viscous", "viscous_mirror"))
+    assert cfg == dataclasses.replace(Config(), arm=dataclasses.replace(Config().arm, one_link_stop=False), eval=then)
     partial = {**to_dict(Config()), "version": 1}
     del partial["arm"]["one_link_stop"]  # a version-1 config that left it out trained with the clamp
     assert from_dict(partial).arm.one_link_stop is False
@@ -155,6 +158,27 @@ def test_before_version_13_the_elbow_stop_is_the_clamp_and_the_evaluation_judges
     del stored["arm"]["one_link_stop"]  # version 13 stores it
     with pytest.raises(ValueError, match="^arm.one_link_stop: missing"):
         from_dict(stored)
+
+
+def test_before_version_14_the_field_trains_and_is_judged_in_the_frame_as_applied():
+    """Version 14 trains the paper's field mirrored and judges that frame first; a config that stored its
+    conditions, frames and protocols reads them as stored, and a version-1 config that left them out reads those
+    of the frame as applied."""
+    today = Config()
+    assert today.train.conditions == ("none", "viscous_mirror", "random", "random_nopast")
+    assert today.eval.frames == ("viscous_mirror", "viscous")
+    assert [b.condition for b in blocks_of(today, "adaptation")] == ["none", "viscous_mirror", "none"]
+    then = compat.CHANGED_DEFAULTS[14]
+    partial = {**to_dict(today), "version": 1}
+    del partial["train"]["conditions"], partial["eval"]["frames"], partial["protocols"]
+    old = from_dict(partial)
+    assert old.train.conditions == CONDITIONS == tuple(then["train"]["conditions"])
+    assert old.eval.frames == ("viscous", "viscous_mirror")
+    assert [b.condition for b in blocks_of(old, "adaptation")] == ["none", "viscous", "none"]
+    assert [b.catch for b in blocks_of(old, "adaptation")] == [b.catch for b in blocks_of(today, "adaptation")]
+    as_applied = dataclasses.replace(today, train=dataclasses.replace(today.train, conditions=CONDITIONS))
+    stored = {**to_dict(as_applied), "version": 13}
+    assert from_dict(stored) == as_applied
 
 
 LEVERS_6 = ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")  # hyperparameters of version 6

@@ -100,8 +100,8 @@ def api_run(tmp_path_factory):
 @pytest.mark.slow
 def test_the_python_api_example_trains_evaluates_and_loads(api_run):
     stdout, out = api_run
-    assert "none -> viscous: success" in stdout and "claim 1:" in stdout
-    assert "learners (condition, seed): [('none', 0), ('viscous', 0)]" in stdout
+    assert "none -> viscous_mirror: success" in stdout and "claim 1:" in stdout
+    assert "learners (condition, seed): [('none', 0), ('viscous_mirror', 0)]" in stdout
     for name in ("table2.md", "claims.json", "fig4.png"):
         assert (out / "eval" / name).is_file()
     assert '--8<-- "docs/examples/python_api.py"' in (ROOT / "docs" / "python-api.md").read_text()
@@ -112,7 +112,7 @@ def test_the_animation_shows_both_test_conditions(api_run, tmp_path):
     _, out = api_run
     run = run_dir.load(out)
     assert animation.pick_network(run, "none", "none") == 0
-    ep, traj = animation.movements(run, [0], ("none", "viscous"))
+    ep, traj = animation.movements(run, [0], ("none", "viscous_mirror"))
     assert ep.outcome.shape == (1, 2, 4) and set(ep.outcome.ravel()) <= set(range(len(env.OUTCOME_NAMES)))
     # The links end at the hand the episode recorded.
     hand = animation.arm_points(traj.arm[0, 0, :, :, :2], run.cfg)[..., 2, :]

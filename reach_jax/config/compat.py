@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -57,7 +57,10 @@ _CONSTANT_EXPLORATION = {
 # main command (model §11). Version 12 made the pick with eq. 2's actor targets clipped to ±0.45 the default, by
 # issue 49's adoption rule (no collapse on held-out seeds, studies/collapse/verdict.md). The pick without the clip is
 # `recipes/round4_pick.json`; the recipe of versions 10-11 is `recipes/constant_exploration.json`. Version 13 made
-# the elbow stop the paper's one link (model §1); a version-1 config trained with the clamp.
+# the elbow stop the paper's one link (model §1); a version-1 config trained with the clamp. Version 14 trains and
+# judges the paper's field mirrored by default, by issue 56's adoption rule (studies/frame/verdict.md): before it, the
+# field's learners and the adaptation protocol's field block trained in the frame as applied, which the first frame
+# judged.
 CHANGED_DEFAULTS = {
     9: _CONSTANT_EXPLORATION,
     10: {
@@ -76,6 +79,17 @@ CHANGED_DEFAULTS = {
     },
     12: {**_CONSTANT_EXPLORATION, "learner": {**_CONSTANT_EXPLORATION["learner"], "actor_target_bound": 0.0}},
     13: {"arm": {"one_link_stop": False}},
+    14: {
+        "train": {"conditions": ["none", "viscous", "random", "random_nopast"]},
+        "eval": {"frames": ["viscous", "viscous_mirror"]},
+        "protocols": {
+            "adaptation": [
+                {"trials": 5_000, "condition": "none"},
+                {"trials": 20_000, "condition": "viscous", "catch": 0.1},
+                {"trials": 20_000, "condition": "none"},
+            ]
+        },
+    },
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change

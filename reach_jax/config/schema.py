@@ -14,16 +14,16 @@ from dataclasses import dataclass, field
 from reach_jax.config import hyper
 from reach_jax.config.paper import ClaimsConfig
 from reach_jax.config.tables import (
-    CONDITIONS,
     PAPER_CONDITIONS,
     PROTOCOLS,
+    TRAINED_CONDITIONS,
     BlockConfig,
     ConditionConfig,
     ProtocolConfig,
 )
 
-# A stored config holds every field; versions 3-8, 11 and 13 added fields, 9-10 and 12-13 changed defaults (`compat`).
-CONFIG_VERSION = 13
+# A stored config holds every field; versions 3-8, 11 and 13 added fields, 9-10 and 12-14 changed defaults (`compat`).
+CONFIG_VERSION = 14
 
 
 @dataclass(frozen=True)
@@ -135,7 +135,7 @@ class EvalConfig:
     # The conditions that each stand for the paper's viscous field in one reading of its coordinates (model §6):
     # every network is tested in each too, and Table 2 and the claims are made once per frame, its field's learners
     # as the paper's viscous row; the first frame is the one the run's main files judge (docs/claims.md).
-    frames: tuple[str, ...] = ("viscous", "viscous_mirror")
+    frames: tuple[str, ...] = ("viscous_mirror", "viscous")
     adaptation_window: int = 1000  # adaptation windows and curve bins span this many trials (choice)
 
 
@@ -145,7 +145,7 @@ class TrainSettings:
 
     trials: int = 2_000_000  # trials per learner, section 4.4
     seeds: int = 2  # networks per condition, section 4.4
-    conditions: tuple[str, ...] = CONDITIONS  # learning conditions (names in Config.conditions), Table 2 rows
+    conditions: tuple[str, ...] = TRAINED_CONDITIONS  # learning conditions (names in Config.conditions), Table 2 rows
     seed: int = 0  # master PRNG seed
     chunk_steps: int = 50_000  # learner steps per compiled chunk; checkpoint and log between chunks
     keep_every: int = 0  # also keep the checkpoint of every keep_every-th chunk (snapshots); 0 = newest two only

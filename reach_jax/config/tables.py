@@ -42,6 +42,9 @@ PAPER_CONDITIONS = (
 
 
 CONDITIONS = tuple(c.name for c in PAPER_CONDITIONS[:4])  # Table 2 rows: the paper's learning conditions
+# The learning conditions a run trains by default: the paper's, its field in the frame that issue 56's held-out run
+# adopted (studies/frame/verdict.md), y mirrored.
+TRAINED_CONDITIONS = ("none", "viscous_mirror", "random", "random_nopast")
 
 
 @dataclass(frozen=True)
@@ -70,7 +73,7 @@ class ProtocolConfig:
 PROTOCOLS = (
     ProtocolConfig(
         "adaptation",
-        (BlockConfig(5_000, "none"), BlockConfig(20_000, "viscous", catch=0.1), BlockConfig(20_000, "none")),
+        (BlockConfig(5_000, "none"), BlockConfig(20_000, "viscous_mirror", catch=0.1), BlockConfig(20_000, "none")),
     ),
     ProtocolConfig(
         "adaptation_control",

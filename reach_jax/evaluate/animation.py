@@ -3,8 +3,9 @@
 `python -m reach_jax.evaluate RUN --animate [PATH]` writes it (default RUN/eval/reaching.gif). One network
 of the run (by default the no-field network that succeeds most often without the field) makes the four
 movements lower left → lower right → upper right → upper left → lower left, once in each of two test
-conditions side by side (default none and viscous), with the 5×5 sensor grid, the goal squares, the two links
-and the hand's path so far. The test is the one of Table 2: no learning, no exploration noise, no drift.
+conditions side by side (default none and the paper's field in the run's main frame), with the 5×5 sensor grid,
+the goal squares, the two links and the hand's path so far. The test is the one of Table 2: no learning, no
+exploration noise, no drift.
 
 Units: positions [m] in the shoulder frame, time [s].
 """
@@ -24,6 +25,7 @@ from reach_jax.config import Config
 from reach_jax.env import task
 from reach_jax.env.environment import OUTCOME_NAMES, SUCCESS
 from reach_jax.evaluate import episodes, figures, paper_figures
+from reach_jax.evaluate.frames import PAPER_FIELD, frame_list
 from reach_jax.evaluate.paper_figures import CORNER_NAMES, corner_centres
 from reach_jax.store import run_dir as run_dir_io
 
@@ -165,7 +167,7 @@ def animate(
     out: Path | None = None,
     network: int | None = None,
     learned: str = "none",
-    tests: tuple[str, str] = ("none", "viscous"),
+    tests: tuple[str, str] | None = None,
     stride: int = 2,
     dpi: int = 72,
 ) -> Path:
@@ -177,12 +179,13 @@ def animate(
       network: the learner to show; default the learner of condition `learned` that succeeds most often in
         the first test condition (`pick_network`).
       learned: the learning condition to pick a network from.
-      tests: the two test conditions, drawn left and right.
+      tests: the two test conditions, drawn left and right; default none and the run's main frame (`frames.frame_list`).
       stride: arm steps (of cfg.arm.dt) per frame; the GIF plays at real time.
       dpi: resolution of the frames.
     """
     run = run_dir_io.load(run_dir)
     cfg = run.cfg
+    tests = ("none", frame_list(cfg)[0] or PAPER_FIELD) if tests is None else tests
     network = pick_network(run, learned, tests[0]) if network is None else network
     ep, traj = (jax.tree.map(lambda a: a[0], x) for x in movements(run, [network], tests))
     _, targets = cycle_pairs(cfg)

@@ -96,9 +96,11 @@ def recipe_index(hypers) -> tuple[list[dict], list[int]]:
 
 
 def learning_conditions(learners: list[tuple[str, int]], cfg: Config) -> list[str]:
-    """The learning conditions that have networks, in the order of the config's conditions table."""
+    """The learning conditions that have networks: those of cfg.train.conditions in its order (the paper's, whichever
+    frame its field trains in), then the others in the order of the config's conditions table."""
     names = {name for name, _ in learners}
-    return [c.name for c in cfg.conditions if c.name in names]
+    order = dict.fromkeys([*cfg.train.conditions, *(c.name for c in cfg.conditions)])
+    return [name for name in order if name in names]
 
 
 def table2(outcome: np.ndarray, steps: np.ndarray, learners: list[tuple[str, int]], recipe_of, cfg: Config) -> dict:
