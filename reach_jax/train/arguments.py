@@ -14,6 +14,7 @@ from pathlib import Path
 from reach_jax import train
 from reach_jax.config import (
     CONDITIONS,
+    TRAINED_CONDITIONS,
     hyper,
     tuplify,
 )
@@ -102,8 +103,9 @@ def _add_core_arguments(core) -> None:
     core.add_argument(
         "--conditions",
         type=_conditions,
-        help=f"comma-separated names from the conditions table (the paper's: {','.join(CONDITIONS)}; add one with "
-        "--config FILE or --set conditions.NAME.FIELD=JSON)",
+        help=f"comma-separated names from the conditions table (default {','.join(TRAINED_CONDITIONS)}: the "
+        f"paper's {','.join(CONDITIONS)} with its field mirrored, model §6; add one with --config FILE or --set "
+        "conditions.NAME.FIELD=JSON)",
     )
     core.add_argument(
         "--protocol",
