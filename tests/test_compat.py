@@ -12,6 +12,7 @@ from reach_jax.config import (
     CONFIG_VERSION,
     Config,
     LearnerConfig,
+    TaskConfig,
     blocks_of,
     checked_config,
     compat,
@@ -90,22 +91,26 @@ def test_version_1_fields_added_since_read_as_what_those_runs_trained_with():
 
 
 def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_before():
-    """Version 9 made round 4's pick the default, version 10 put the old recipe back and version 12 made the pick
-    with its actor targets clipped the default; a version-1 config without those fields trained the old recipe."""
-    old, pick, before_12 = compat.CHANGED_DEFAULTS[9], compat.CHANGED_DEFAULTS[10], compat.CHANGED_DEFAULTS[12]
+    """Version 9 made round 4's pick the default, version 10 put the old recipe back, version 12 made the pick with
+    its actor targets clipped the default and version 14 the old recipe again; a version-1 config without those
+    fields trained the old recipe."""
+    old, pick, before_12, before_14 = (compat.CHANGED_DEFAULTS[v] for v in (9, 10, 12, 14))
     assert old.keys() == pick.keys() == before_12.keys() and all(old[s].keys() == pick[s].keys() for s in old)
-    stored = {**to_dict(Config()), "version": 1}
-    for section, fields in before_12.items():
-        for name in fields:
+    assert {**pick["learner"], "actor_target_bound": 0.45} == before_14["learner"] and pick["task"] == before_14["task"]
+    old_config = Config(learner=LearnerConfig(**before_14["learner"]), task=TaskConfig(**before_14["task"]))
+    stored = {**to_dict(old_config), "version": 1}
+    for section in ("learner", "task"):
+        for name in before_12[section]:
             del stored[section][name]
     cfg = from_dict(stored)
     for section, fields in before_12.items():
         for name, value in fields.items():
-            assert getattr(getattr(cfg, section), name) == value != getattr(getattr(Config(), section), name), name
+            assert getattr(getattr(cfg, section), name) == value != getattr(getattr(old_config, section), name), name
     today = hyper.defaults()
-    assert hyper.defaults(8) == hyper.defaults(10) == hyper.defaults(11) == {**today, **before_12["learner"]}
+    assert hyper.defaults(8) == hyper.defaults(10) == hyper.defaults(11) == {**today, **before_12["learner"]} == today
     assert hyper.defaults(9) == {**today, **pick["learner"], "actor_target_bound": 0.0}
-    assert hyper.defaults(12) == today == {**hyper.defaults(9), "actor_target_bound": 0.45}
+    assert hyper.defaults(12) == hyper.defaults(13) == {**hyper.defaults(9), "actor_target_bound": 0.45}
+    assert hyper.defaults(13) != today and hyper.defaults(14) == today
     stored = {**to_dict(Config(learner=LearnerConfig(**pick["learner"]))), "version": 9}  # complete: its values stand
     assert from_dict(stored).learner == LearnerConfig(**pick["learner"])
     del stored["learner"]["lr"]
@@ -114,11 +119,13 @@ def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_
 
 
 @pytest.mark.parametrize(
-    ("recipe", "version"), [("round4_pick", 9), ("constant_exploration", 10), ("constant_exploration", 11)]
+    ("recipe", "version"),
+    [("round4_pick", 9), ("constant_exploration", 10), ("constant_exploration", 11), ("clipped_pick", 13)],
 )
 def test_a_named_recipe_is_an_earlier_default_one_config_away(recipe, version):
     """recipes/round4_pick.json spells config version 9's default recipe, recipes/constant_exploration.json that of
-    versions 10-11 (and 1-8): the values `CHANGED_DEFAULTS` holds."""
+    versions 10-11 (and 1-8, and 14 on) and recipes/clipped_pick.json that of versions 12-13: the values
+    `CHANGED_DEFAULTS` holds."""
     data = read_config_file(Path(__file__).resolve().parents[1] / "recipes" / f"{recipe}.json")
     assert "comment" not in data  # read and dropped
     cfg = checked_config(data)

@@ -51,6 +51,23 @@ _CONSTANT_EXPLORATION = {
     "task": {"max_trial_time": 10.0},
 }
 
+# Round 4's pick (the default of version 9), and the same with eq. 2's actor targets clipped (versions 12-13).
+_ROUND4_PICK = {
+    "learner": {
+        "lr": 1.6,
+        "noise": 0.213,
+        "lam": 0.99728,
+        "noise_final_ratio": 0.758,
+        "noise_anneal_delay": 298_000,
+        "noise_value_ratio": 0.716,
+        "noise_corr": 0.311,
+        "actor_signal_gain": 0.703,
+        "drift_gate": 0.401,
+    },
+    "task": {"max_trial_time": 4.0},
+}
+_CLIPPED_PICK = {**_ROUND4_PICK, "learner": {**_ROUND4_PICK["learner"], "actor_target_bound": 0.45}}
+
 # Defaults changed with a config version, at their values before it: a version-1 config, which left out the
 # fields added during its life, trained with these where it lacks them. Version 9 made round 4's held-out pick the
 # default recipe; version 10 put the recipe of version 8 back, since the pick collapsed learners in both runs of the
@@ -58,28 +75,16 @@ _CONSTANT_EXPLORATION = {
 # issue 49's adoption rule (no collapse on held-out seeds, studies/collapse/verdict.md). The pick without the clip is
 # `recipes/round4_pick.json`; the recipe of versions 10-11 is `recipes/constant_exploration.json`. Version 13 made
 # the elbow stop the paper's one link (model §1); a version-1 config trained with the clamp. Version 14 trains and
-# judges the paper's field mirrored by default, by issue 56's adoption rule (studies/frame/verdict.md): before it, the
-# field's learners and the adaptation protocol's field block trained in the frame as applied, which the first frame
-# judged.
+# judges the paper's field mirrored by default, with the constant-exploration recipe, by issue 56's adoption rule
+# (studies/frame/verdict.md): before it, the field's learners and the adaptation protocol's field block trained in the
+# frame as applied, which the first frame judged, with the clipped pick (`recipes/clipped_pick.json`).
 CHANGED_DEFAULTS = {
     9: _CONSTANT_EXPLORATION,
-    10: {
-        "learner": {
-            "lr": 1.6,
-            "noise": 0.213,
-            "lam": 0.99728,
-            "noise_final_ratio": 0.758,
-            "noise_anneal_delay": 298_000,
-            "noise_value_ratio": 0.716,
-            "noise_corr": 0.311,
-            "actor_signal_gain": 0.703,
-            "drift_gate": 0.401,
-        },
-        "task": {"max_trial_time": 4.0},
-    },
+    10: _ROUND4_PICK,
     12: {**_CONSTANT_EXPLORATION, "learner": {**_CONSTANT_EXPLORATION["learner"], "actor_target_bound": 0.0}},
     13: {"arm": {"one_link_stop": False}},
     14: {
+        **_CLIPPED_PICK,
         "train": {"conditions": ["none", "viscous", "random", "random_nopast"]},
         "eval": {"frames": ["viscous", "viscous_mirror"]},
         "protocols": {

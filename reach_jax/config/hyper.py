@@ -20,30 +20,30 @@ from reach_jax.config.hyperparameter import Hyperparameter
 TABLE = (
     Hyperparameter(
         "lr",
-        1.6,
-        "SGD learning rate on squared error (issue 49's held-out pick, model §11)",
+        1.0,
+        "SGD learning rate on squared error (model §11 choice; issue 56's held-out pick)",
         low_open=True,
         words="learning rate {v:g}",
     ),
     Hyperparameter(
         "noise",
-        0.213,
-        "exploration bound b of rnd ~ U(-b, b) in actor units (issue 49's held-out pick, model §11)",
+        0.2,
+        "exploration bound b of rnd ~ U(-b, b) in actor units (model §11 choice; issue 56's held-out pick)",
         words="bound {v:g}",
     ),
     Hyperparameter(
-        "lam", 0.99728, "lambda of eq. 3 (issue 49's held-out pick, model §11)", low_open=True, words="λ {v:g}"
+        "lam", 0.999, "lambda of eq. 3 (model §11 choice; issue 56's held-out pick)", low_open=True, words="λ {v:g}"
     ),
     Hyperparameter(
         "noise_final_ratio",
-        0.758,
-        "bound after the anneal as a fraction of noise; 1 = no anneal (issue 49's held-out pick, model §11)",
+        1.0,
+        "bound after the anneal as a fraction of noise; 1 = no anneal (model §5 choice)",
         words="annealed to ×{v:g}",
     ),
     Hyperparameter(
         "noise_anneal_delay",
-        298_000,
-        "trials from the first full-field trial to the start of the anneal (issue 49's held-out pick, model §11)",
+        0,
+        "trials from the first full-field trial to the start of the anneal",
         integer=True,
         words="the anneal {v:,.0f} trials after the whole field",
         part_of="noise_final_ratio",
@@ -58,9 +58,8 @@ TABLE = (
     ),
     Hyperparameter(
         "noise_value_ratio",
-        0.716,
-        "smallest bound, where the critic expects the goal, as a fraction of the bound; 1 = off (issue 49's held-out "
-        "pick, model §11)",
+        1.0,
+        "smallest bound, where the critic expects the goal, as a fraction of the bound; 1 = off (model §5 choice)",
         high=1.0,
         neutral=1.0,
         words="×{v:g} near the goal",
@@ -112,8 +111,8 @@ TABLE = (
     ),
     Hyperparameter(
         "noise_corr",
-        0.311,
-        "step-to-step correlation of rnd, AR(1) with the spread kept; 0 = white (issue 49's held-out pick, model §11)",
+        0.0,
+        "step-to-step correlation of rnd, AR(1) with the spread kept; 0 = white (model §5 choice)",
         high=1.0,
         high_open=True,
         neutral=0.0,
@@ -138,18 +137,16 @@ TABLE = (
     ),
     Hyperparameter(
         "actor_signal_gain",
-        0.703,
-        "g: eq. 2's actor signal multiplied by it, the critic's left as it is; 1 = eq. 2 (issue 49's held-out pick "
-        "departs from it, model §11)",
+        1.0,
+        "g: eq. 2's actor signal multiplied by it, the critic's left as it is; 1 = eq. 2 (departs from it, model §5)",
         neutral=1.0,
         words="actor-only gain {v:g}",
     ),
     Hyperparameter(
         "actor_target_bound",
-        0.45,
+        0.0,
         "a: eq. 2's actor targets clipped to [-a, a], so that no target drives an actor output into saturation, where "
-        "its gradient and the noise's effect on the torque vanish; 0 = off, eq. 2 (issue 49's held-out pick departs "
-        "from it, model §11)",
+        "its gradient and the noise's effect on the torque vanish; 0 = off, eq. 2 (departs from it, model §5)",
         high=0.5,
         neutral=0.0,
         words="actor targets within ±{v:g}",
@@ -165,9 +162,9 @@ TABLE = (
     ),
     Hyperparameter(
         "drift_gate",
-        0.401,
+        0.0,
         "a trial's target drifts only while the learner's recent failure share exceeds it; 0 = off, every trial "
-        "drifts (the paper's 'often fails'; issue 49's held-out pick, model §11)",
+        "drifts (the paper's 'often fails', model §5)",
         high=1.0,
         neutral=0.0,
         words="drift only above {v:g} recent failure",
