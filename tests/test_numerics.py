@@ -711,9 +711,10 @@ EXPLORATION_FORMS = {
 # constant 2 trials) from a start below the gate's 0.6, so that it is closed in the first trial, opens after
 # failures and closes again after a clean success; N_max from clean successes only; the actor's signal at half its
 # size; the actor's targets within +-0.003 (its outputs reach about 0.004 in these 200 steps). An early, fast
-# drift (from 0.4 s, 4 mm a step) makes drift-aided successes within 200 steps; seeds 6 and 7 then also end trials
-# at each of the goal, a limit and the cap.
+# drift (from 0.4 s, 4 mm a step) makes drift-aided successes within 200 steps; on the clipped pick's other values
+# (the default of versions 12-13), seeds 6 and 7 then also end trials at each of the goal, a limit and the cap.
 LEVERS = {
+    **compat.CHANGED_DEFAULTS[14]["learner"],
     "drift_gate": 0.6,
     "drift_gate_trials": 2,
     "n_max_clean": 1.0,
