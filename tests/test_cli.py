@@ -75,7 +75,7 @@ def test_list_hyper_prints_the_table_and_exits_0_writing_nothing(tmp_path, monke
     assert lines[0].split() == ["name", "default", "range", "help"]
     assert [line.split()[0] for line in lines[1:]] == list(hyper.NAMES)
     row = {line.split()[0]: line for line in lines[1:]}
-    assert row["noise_corr"].split()[1:3] == ["0.311", "[0,"] and "correlation" in row["noise_corr"]
+    assert row["lam"].split()[1:3] == ["0.999", "(0,"] and "correlation" in row["noise_corr"]
     assert "whole, [0, inf)" in row["quiet_every"] and "(0, inf)" in row["lr"]
     assert row["n_max_clean"].split()[1:3] == ["false", "true/false"]
     assert list(tmp_path.iterdir()) == []
@@ -85,18 +85,17 @@ def test_describe_words_a_recipe_from_the_table_naming_only_what_is_set_and_on()
     # Every entry has its words, and a part of a form is named only while that form is on.
     assert all(h.words for h in hyper.TABLE)
     assert all(h.part_of in hyper.BY_NAME and h.part_of != h.name for h in hyper.TABLE if h.part_of)
-    assert hyper.describe({}) == "bound 0.213"
+    assert hyper.describe({}) == "bound 0.2"
     # Float32 values, as a batch stores them, print as their float32 shortest.
     label = {"noise": 0.2, "lr": 1.0, "noise_value_ratio": np.float32(0.5), "drift_gate": np.float32(0.3)}
+    assert hyper.describe(label) == "bound 0.2; ×0.5 near the goal; drift only above 0.3 recent failure"
+    # Versions 8 and 11 had today's recipe (constant exploration): nothing more is said against their defaults.
+    assert hyper.describe(label, hyper.defaults(8)) == hyper.describe(label, hyper.defaults(11)) == hyper.describe(label)
+    # Against the defaults of another time (versions 9 and 13: lr 1.6), what differed from them is said, and no more.
     assert (
-        hyper.describe(label) == "bound 0.2; learning rate 1; ×0.5 near the goal; drift only above 0.3 recent failure"
-    )
-    assert hyper.describe(label, hyper.defaults(9)) == hyper.describe(label)  # version 9's lr, gate and ratio: today's
-    # Against the defaults of another time (config version 8: lr 1), what they held goes unsaid, and no more.
-    assert (
-        hyper.describe(label, hyper.defaults(8))
-        == hyper.describe(label, hyper.defaults(11))
-        == "bound 0.2; ×0.5 near the goal; drift only above 0.3 recent failure"
+        hyper.describe(label, hyper.defaults(9))
+        == hyper.describe(label, hyper.defaults(13))
+        == "bound 0.2; learning rate 1; ×0.5 near the goal; drift only above 0.3 recent failure"
     )
     off = {"noise": 0.1, "noise_anneal_trials": 100_000, "drift_gate_trials": 50, "n_max_clean": 1.0}
     assert hyper.describe(off) == "bound 0.1; N_max from clean successes"
@@ -113,7 +112,7 @@ def test_zipped_grids_pair_point_by_point_and_must_share_a_length():
     crossed, zipped = parsed(*argv), parsed(*argv, "--set", "train.zip_grids=true")
     assert len(batch.hyper_grid(crossed)) == 9 and len(batch.learner_table(crossed.train)) == 9 * 2 * 2
     points = [(h["lr"], h["noise"], h["lam"]) for h in batch.hyper_grid(zipped)]
-    assert points == [(0.5, 0.15, 0.99728), (1.0, 0.2, 0.99728), (2.0, 0.3, 0.99728)]  # an unswept one at its default
+    assert points == [(0.5, 0.15, 0.999), (1.0, 0.2, 0.999), (2.0, 0.3, 0.999)]  # an unswept one at its default
     assert len(batch.learner_table(zipped.train)) == len(batch.learner_hypers(zipped)) == 3 * 2 * 2
     assert np.asarray(batch.hyper_columns(zipped).noise).tolist() == pytest.approx(
         [0.15] * 2 + [0.2] * 2 + [0.3] * 2 + [0.15] * 2 + [0.2] * 2 + [0.3] * 2

@@ -36,9 +36,12 @@ def test_rows_agree_with_the_recipe_rule_and_the_exploration_map(load_tool):
             assert row["none_viscous"]["success"] == point["none_viscous_success"]
             assert {k: row["damping"][k] for k in point["damping"]} == point["damping"]
     assert [r["frame"] for r in compare.recipe_rows(RUNS[0])] == ["viscous", "viscous_mirror"]
-    # The old default's held-out run: nothing to say against its own era's defaults, its recipe against today's.
-    assert explore.recipe_rows(RUNS[0])[0]["exploration"] == "bound 0.2"
-    assert compare.recipe_rows(RUNS[0])[0]["words"].startswith("bound 0.2; learning rate 1; λ 0.999; annealed to ×1")
+    # The held-out run of constant exploration, the rounds' recipe and today's: nothing to say against either.
+    assert explore.recipe_rows(RUNS[0])[0]["exploration"] == compare.recipe_rows(RUNS[0])[0]["words"] == "bound 0.2"
+    # The clipped pick's held-out run (versions 12-13's default), against today's defaults.
+    clipped = compare.recipe_rows(ROOT / "runs" / "collapse_heldout")[0]["words"]
+    assert clipped.startswith("bound 0.213; learning rate 1.6; λ 0.99728; annealed to ×0.758")
+    assert "actor targets within ±0.45" in clipped
 
 
 def test_the_table_has_one_line_per_recipe_and_json_the_same_rows(tmp_path, capsys):
