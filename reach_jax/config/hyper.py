@@ -138,7 +138,7 @@ TABLE = (
     Hyperparameter(
         "actor_signal_gain",
         1.0,
-        "g: eq. 2's actor signal multiplied by it, the critic's left as it is; 1 = eq. 2 (departs from it, model §5)",
+        "g: eq. 2's actor signal multiplied by it, the critic's left as it is; 1 = eq. 2, others depart (model §5)",
         neutral=1.0,
         words="actor-only gain {v:g}",
     ),
@@ -146,7 +146,7 @@ TABLE = (
         "actor_target_bound",
         0.0,
         "a: eq. 2's actor targets clipped to [-a, a], so that no target drives an actor output into saturation, where "
-        "its gradient and the noise's effect on the torque vanish; 0 = off, eq. 2 (departs from it, model §5)",
+        "its gradient and the noise's effect on the torque vanish; 0 = off, eq. 2, others depart (model §5)",
         high=0.5,
         neutral=0.0,
         words="actor targets within ±{v:g}",
