@@ -54,14 +54,16 @@ def test_a_stored_force_section_becomes_the_paper_conditions_fields():
     task_then = TaskConfig(drift_neutral_when_full=False, **then["task"])
     arm_then = dataclasses.replace(Config().arm, one_link_stop=False)  # the clamp, before config version 13
     want = dataclasses.replace(Config(), learner=LearnerConfig(**then["learner"]), task=task_then, arm=arm_then)
+
     # The field trained and judged in the frame as applied, before config version 14.
-    applied = {b: dataclasses.replace(b, condition="viscous") for p in PROTOCOLS for b in p.blocks}
-    applied = {b: a for b, a in applied.items() if b.condition == "viscous_mirror"}
+    def as_applied(block):
+        return dataclasses.replace(block, condition="viscous") if block.condition == "viscous_mirror" else block
+
     want = dataclasses.replace(
         want,
         train=dataclasses.replace(want.train, conditions=CONDITIONS),
         eval=dataclasses.replace(want.eval, frames=("viscous", "viscous_mirror")),
-        protocols=tuple(ProtocolConfig(p.name, tuple(applied.get(b, b) for b in p.blocks)) for p in PROTOCOLS),
+        protocols=tuple(ProtocolConfig(p.name, tuple(map(as_applied, p.blocks))) for p in PROTOCOLS),
     )
     assert from_dict(old) == want
     changed = from_dict({"version": 1, "force": {"random_amplitude": 5.0}})
