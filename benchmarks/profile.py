@@ -44,8 +44,10 @@ def parts(cfg):
     from reach_jax import env
     from reach_jax.agent import exploration, learner, network
     from reach_jax.engine import random_stream, rollout
-    from reach_jax.env import curriculum
+    from reach_jax.env import curriculum, task
     from reach_jax.physics import encoding
+
+    geom = task.geometry(cfg)  # the config's own sensor, as every learner of the profiled batch has
 
     # Each part's result feeds the carried state in full, so that the compiler removes none of it.
     def draws(s, u):
@@ -53,13 +55,13 @@ def parts(cfg):
 
     def observe(s, u):  # the arm moves a little, so the observation cannot be hoisted out of the loop
         trial = s.env.trial.replace(arm=s.env.trial.arm + 1e-6 * u[0])
-        x = env.observe_trial(trial, s.env.cond, cfg)
+        x = env.observe_trial(trial, s.env.cond, geom, cfg)
         return s.replace(env=s.env.replace(trial=trial), agent=s.agent.replace(n_max=s.agent.n_max + jnp.sum(x)))
 
     def ts_step(s, u):
         trial = s.env.trial.replace(arm=s.env.trial.arm + 1e-6 * u[0])
         s = s.replace(env=s.env.replace(trial=trial))
-        x = env.observe(s.env, cfg)
+        x = env.observe(s.env, geom, cfg)
         rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)
         params, out, _, u1 = learner.ts_step(s.agent.params, x, s.agent.pending, s.agent.n_max, 1.0, cfg, rows)
         pending = s.agent.pending._replace(x=x, out=out, u1=u1)
@@ -67,13 +69,13 @@ def parts(cfg):
 
     def arm_step(s, u):
         unit, _ = random_stream.split_uniforms(u, cfg)
-        trial, _ = env.step_trial(s.env.trial, network.torque(unit, 0.0, cfg), s.env.cond, cfg)
+        trial, _ = env.step_trial(s.env.trial, network.torque(unit, 0.0, cfg), s.env.cond, geom, cfg)
         return s.replace(env=s.env.replace(trial=trial))
 
     def env_step(s, u, plan, hyper):
         unit, draws_ = random_stream.split_uniforms(u, cfg)
         cur = s.env.curriculum
-        scale = exploration.value_scale(hyper, 0.0, cur.full_at, curriculum.shortfall(cur, cfg), s.env.trial.t)
+        scale = exploration.value_scale(hyper, 0.0, cur.full_at, curriculum.shortfall(cur, geom), s.env.trial.t)
         carried, fresh = exploration.noise(unit, hyper, s.env.trials, cur.full_at, scale, unit)
         params = env.env_params(plan, hyper)
         new, _ = env.step(s.env, network.torque(carried, fresh, cfg), draws_, params, cfg)

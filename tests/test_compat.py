@@ -146,7 +146,8 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    with pytest.raises(ValueError, match="^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13 or 14, found 0"):
+    expected = "^version: expected 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14 or 15, found 0"
+    with pytest.raises(ValueError, match=expected):
         from_dict({**to_dict(Config()), "version": 0})
 
 

@@ -83,7 +83,7 @@ def run_policy(policy, params, masks=None, starts=None, targets=None):
 def test_lattice_gives_exactly_1040_pairs_none_touching():
     starts, targets = evaluate.test_pairs(CFG)
     assert starts.shape == targets.shape == (1040, 2)
-    assert not np.any(np.asarray(task.touching(jnp.asarray(starts), jnp.asarray(targets), CFG)))
+    assert not np.any(np.asarray(task.touching(jnp.asarray(starts), jnp.asarray(targets), task.goal_half_width(CFG))))
     assert len({(*s, *t) for s, t in zip(starts.tolist(), targets.tolist(), strict=True)}) == 1040
 
     pts = evaluate.lattice_points(CFG)
@@ -96,7 +96,8 @@ def test_lattice_gives_exactly_1040_pairs_none_touching():
     kept = {(*s, *t) for s, t in zip(starts.tolist(), targets.tolist(), strict=True)}
     dropped = [i for i in range(len(all_s)) if (*all_s[i], *all_t[i]) not in kept]
     assert len(dropped) == 36**2 - 1040
-    assert np.all(np.asarray(task.touching(jnp.asarray(all_s[dropped]), jnp.asarray(all_t[dropped]), CFG)))
+    half = task.goal_half_width(CFG)
+    assert np.all(np.asarray(task.touching(jnp.asarray(all_s[dropped]), jnp.asarray(all_t[dropped]), half)))
     # The kept points are the 8 x 8 edge-to-edge lattice minus its border, whose squares stick out.
     k = np.arange(CFG.eval.lattice) / (CFG.eval.lattice - 1)
     xs = x0 + k * (x1 - x0)

@@ -108,7 +108,7 @@ def test_dsdt_and_rk4_match_oracle(case):
         assert np.abs(plain - want_d).max() > 1e-3
 
 
-_ENV_STEP = jax.jit(lambda s, tau, c: env.step_trial(s, tau, c, CFG))
+_ENV_STEP = jax.jit(lambda s, tau, c: env.step_trial(s, tau, c, task.geometry(CFG), CFG))
 
 
 @pytest.mark.parametrize("case", sorted(FORCE_CASES))
@@ -125,7 +125,8 @@ def test_environment_trial_matches_oracle(case):
     seen_drift = False
     for t in range(1, 81):
         want_x = reference.observe(state, prev, prev_tau, ref_target, mask, CFG)
-        np.testing.assert_allclose(np.asarray(env.observe_trial(trial, cond, CFG)), want_x, rtol=0, atol=1e-9)
+        got_x = env.observe_trial(trial, cond, task.geometry(CFG), CFG)
+        np.testing.assert_allclose(np.asarray(got_x), want_x, rtol=0, atol=1e-9)
         tau = rng.uniform(-0.5, 0.5, 2) * np.array(CFG.arm.tau_max)
         trial, outcome = _ENV_STEP(trial, jnp.asarray(tau), cond)
         moved = reference.arm_step(state, tau, spec, force, CFG.arm)
@@ -232,7 +233,7 @@ def _sensor_cases(rng):
 
 
 def test_sensor_matches_oracle():
-    render = jax.jit(jax.vmap(lambda h, t: sensor.render(h, t, CFG.sensor)))
+    render = jax.jit(jax.vmap(lambda h, t: sensor.render(h, t, sensor.placement(CFG.sensor), CFG.sensor.n_cells)))
     cases = _sensor_cases(_rng(3))
     hands = np.array([h for h, _ in cases])
     targets = np.array([t for _, t in cases])
@@ -246,7 +247,7 @@ def test_sensor_matches_oracle():
 
 def test_sensor_total_area():
     """Independent of both codes: inside the field, disjoint squares cover 2 cells' worth, identical squares 1."""
-    render = jax.jit(lambda h, t: sensor.render(h, t, CFG.sensor))
+    render = jax.jit(lambda h, t: sensor.render(h, t, sensor.placement(CFG.sensor), CFG.sensor.n_cells))
     (x0, y0), _ = reference.field_bounds(CFG.sensor)
     c = CFG.sensor.cell_size
     hand = np.array([x0 + 1.3 * c, y0 + 1.7 * c])
@@ -513,7 +514,7 @@ def test_n_max_and_curriculum_match_oracle():
     for n_max, n_steps in [(100.0, 150), (100.0, 99), (100.0, 100), (10.0, 3)]:
         got = float(upd(jnp.asarray(n_max), jnp.asarray(n_steps, jnp.int32)))
         assert got == pytest.approx(reference.update_n_max(n_max, n_steps, lam), rel=1e-15)
-    cur = jax.jit(lambda d, g, dr, full, early: curriculum.staircase(d, g, dr, full, CFG, early))
+    cur = jax.jit(lambda d, g, dr, full, early: curriculum.staircase(d, g, dr, full, task.geometry(CFG), CFG, early))
     lo, hi = reference.curriculum_bounds(CFG)
     for d in (lo, 0.5 * (lo + hi), hi):
         for goal, drifted, full, early in itertools.product((True, False), repeat=4):
@@ -529,7 +530,7 @@ def test_n_max_and_curriculum_match_oracle():
 
 def test_trial_placement_and_drift_match_oracle():
     rng = _rng(11)
-    place = jax.jit(lambda d, dist, field: task.place_trial(d, dist, field, CFG))
+    place = jax.jit(lambda d, dist, field: task.place_trial(d, dist, field, task.geometry(CFG), CFG))
     random, null = ConditionConfig(random=(8.0, 3.0)), ConditionConfig()
     drift = jax.jit(lambda tg, h, t: task.drift_target(tg, h, t, CFG))
     lo, hi = reference.curriculum_bounds(CFG)
@@ -567,7 +568,8 @@ def test_drift_gate_and_failure_share_match_oracle():
         assert got == pytest.approx(reference.update_failure(failure, goal, drifted, h), abs=1e-15)
     # Only a success without drift lowers the share.
     assert reference.update_failure(0.3, True, False, h) < 0.3 < reference.update_failure(0.3, True, True, h)
-    is_open = jax.jit(lambda f, g: curriculum.drift_open(curriculum.initial(CFG).replace(failure=f), g))
+    start = curriculum.initial(task.geometry(CFG), CFG)
+    is_open = jax.jit(lambda f, g: curriculum.drift_open(start.replace(failure=f), g))
     for failure, gate in itertools.product((0.0, 0.2, 0.5, 1.0), (0.0, 0.2, 0.7, 1.0)):
         want = reference.drift_open(failure, {**h, "drift_gate": gate})
         assert bool(is_open(jnp.asarray(failure), jnp.asarray(gate))) == want

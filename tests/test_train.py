@@ -98,12 +98,12 @@ def test_n_max_follows_eq_3():
 
 
 def test_curriculum_staircase_moves_and_stays_in_bounds():
-    lo, hi = curriculum.bounds(CFG)
+    lo, hi = (float(b) for b in curriculum.bounds(task.geometry(CFG)))
     step = CFG.task.curriculum_step
     yes, no = jnp.array(True), jnp.array(False)
 
     def cur(d, goal, drifted=no, was_full=no, cfg=CFG):
-        return float(curriculum.staircase(jnp.asarray(d), goal, drifted, was_full, cfg))
+        return float(curriculum.staircase(jnp.asarray(d), goal, drifted, was_full, task.geometry(cfg), cfg))
 
     assert cur(0.1, yes) == pytest.approx(0.1 + step)
     assert cur(0.1, no) == pytest.approx(0.1 - step)
@@ -122,13 +122,13 @@ def test_new_trials_start_in_field_at_rest_with_untouched_target_in_the_box():
     distance = jnp.array(0.08)
     draws = jax.vmap(lambda k: task.draw_trial(k, CFG))(keys)
     field = fields.make_field(ConditionConfig(random=(8.0, 8.0)))
-    start, target, force = jax.vmap(lambda d: task.place_trial(d, distance, field, CFG))(draws)
+    start, target, force = jax.vmap(lambda d: task.place_trial(d, distance, field, task.geometry(CFG), CFG))(draws)
     hand = jax.vmap(lambda s: arm.hand_position(s[:2], CFG.arm))(start)
     assert np.all(np.asarray(start[:, 2:]) == 0)
     assert np.all((hand >= lo - 1e-6) & (hand <= hi + 1e-6))
     assert np.all((target >= lo - 1e-6) & (target <= hi + 1e-6))
     assert np.all(np.abs(target - hand).max(axis=1) <= float(distance) + 1e-6)
-    assert np.mean(np.asarray(task.touching(hand, target, CFG))) < 0.05
+    assert np.mean(np.asarray(task.touching(hand, target, task.goal_half_width(CFG)))) < 0.05
     assert np.all(np.abs(force) <= 8.0) and np.std(force) > 1.0
 
 
@@ -281,7 +281,7 @@ def test_exploration_anneals_once_the_curriculum_is_full():
 
     # In a rollout, full_at records the trial count when the distance first reaches its maximum, once.
     cfg = tiny()
-    _, hi = curriculum.bounds(cfg)
+    hi = float(curriculum.bounds(task.geometry(cfg))[1])
     cond, hyper = protocol.make_plan("none", cfg), default_hyper(cfg)
     start = init_learner(jax.random.PRNGKey(0), cond, cfg)
     assert int(start.env.curriculum.full_at) == -1
@@ -297,6 +297,7 @@ def test_exploration_anneals_once_the_curriculum_is_full():
     assert np.any(info.out_of_range | info.cap)  # failures moved the distance down, and full_at stayed
     assert float(later.env.curriculum.distance) < hi and int(later.env.curriculum.full_at) == 7
     full_cfg = dataclasses.replace(cfg, task=dataclasses.replace(cfg.task, curriculum_init_cells=cfg.sensor.n_cells))
+    cond = protocol.make_plan("none", full_cfg)  # the plan's geometry holds the initial distance
     assert int(init_learner(jax.random.PRNGKey(0), cond, full_cfg).env.curriculum.full_at) == 0
 
     # The rollout explores within the annealed bound: full from the start, halved after one trial.

@@ -1,7 +1,7 @@
 """The config layer: the schema of every constant, the shipped tables, the paper's numbers, the hyperparameter
-table, and reading, migrating and overlaying configs as JSON."""
+table, the workspace check, and reading, migrating and overlaying configs as JSON."""
 
-from reach_jax.config import compat, hyper
+from reach_jax.config import compat, hyper, workspace
 from reach_jax.config.loading import (
     first_difference,
     from_dict,
@@ -96,4 +96,5 @@ __all__ = [
     "tuplify",
     "with_defaults",
     "with_settings",
+    "workspace",
 ]

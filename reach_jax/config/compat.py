@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -33,6 +33,11 @@ ADDED_CONFIG_FIELDS = {
     },
     # The elbow stop trained as the clamp before version 13; every run is tested in both frames of the field.
     13: {"arm": {"one_link_stop": False}, "eval": {"frames": ["viscous", "viscous_mirror"]}},
+    # The task's geometry as per-learner data: every learner of an older run sees the visual field of its sensor.
+    15: {
+        "learner": {"sensor_dx": 0.0, "sensor_dy": 0.0, "sensor_scale": 1.0},
+        "train": {"sensor_dx_grid": [], "sensor_dy_grid": [], "sensor_scale_grid": []},
+    },
 }
 
 # The constant-exploration recipe (versions 1-8 and 10-11) in the fields that versions 9 and 12 changed.

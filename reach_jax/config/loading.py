@@ -11,7 +11,7 @@ import difflib
 import json
 import math
 
-from reach_jax.config import compat, hyper
+from reach_jax.config import compat, hyper, workspace
 from reach_jax.config.schema import CONFIG_VERSION, Config, blocks_of
 from reach_jax.config.tables import PAPER_CONDITIONS, PROTOCOLS, BlockConfig, ConditionConfig, ProtocolConfig
 from reach_jax.errors import printable
@@ -183,6 +183,7 @@ def from_dict(data: dict) -> Config:
     cfg = Config(**sections, conditions=conditions, protocols=protocols)
     _check_protocols(cfg)
     _check_train(cfg)
+    _check_workspace(cfg)
     return cfg
 
 
@@ -242,6 +243,17 @@ def _check_train(cfg: Config) -> None:
             raise ValueError("learner.noise_value_lo: must lie below noise_value_hi in every sweep point")
     elif max(lows) >= min(highs):
         raise ValueError("learner.noise_value_lo: must lie below noise_value_hi in every sweep point")
+
+
+def _check_workspace(cfg: Config) -> None:
+    """Every sweep point's visual field lies where the arm reaches all of it inside its joint limits."""
+    for s in workspace.sweep_sensors(cfg):
+        why = workspace.field_fault(s, cfg.arm)
+        if why:
+            raise ValueError(
+                f"sensor: the visual field centred at ({s.centre[0]:.3f}, {s.centre[1]:.3f}) m with "
+                f"{s.cell_size:.3f} m cells does not fit the arm: {why} (learner.sensor_dx, _dy, _scale move it)"
+            )
 
 
 def _check_zipped(train) -> None:

@@ -6,6 +6,7 @@ A learner's place in the batch is fixed by the config: conditions, then sweep po
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from typing import NamedTuple
@@ -80,9 +81,16 @@ def conditions(cfg: Config) -> task.Condition:
     return task.stack_conditions([blocks_of(cfg, c)[-1].condition for c, _ in learner_table(cfg.train)], cfg)
 
 
+def learner_configs(cfg: Config) -> list[Config]:
+    """Every learner's config in batch order: the run's, with the learner's own sensor (`task.learner_sensor`)."""
+    sensors = [task.learner_sensor(cfg, h) for h in learner_hypers(cfg)]
+    by_sensor = {s: dataclasses.replace(cfg, sensor=s) for s in dict.fromkeys(sensors)}
+    return [by_sensor[s] for s in sensors]
+
+
 def plans(cfg: Config) -> protocol.Plan:
-    """Every learner's plan, stacked in batch order."""
-    return protocol.stack_plans([c for c, _ in learner_table(cfg.train)], cfg)
+    """Every learner's plan, in its own geometry, stacked in batch order."""
+    return protocol.stack_plans([c for c, _ in learner_table(cfg.train)], learner_configs(cfg))
 
 
 def fresh_states(cfg: Config, plan: protocol.Plan | None = None) -> learner_state.LearnerState:

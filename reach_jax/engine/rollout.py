@@ -40,7 +40,17 @@ class StepInfo(NamedTuple):
     record: jax.Array | None  # (len(trial_log.COLUMNS),) the ended trial's record; None without a per-trial log
 
 
-def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, learns, cfg: Config, speed: Speed):
+def act(
+    state: LearnerState,
+    x: jax.Array,
+    rows: jax.Array,
+    unit,
+    hyper: Hyper,
+    geom: task.Geometry,
+    learns,
+    cfg: Config,
+    speed: Speed,
+):
     """TS update on the pending step, then the torques of this one: (params, out, loss, u1, rnd, gain, tau).
 
     Args:
@@ -49,6 +59,7 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
       rows: this step's non-zero input rows (`encoding.coded_support`).
       unit: (2,) noise draws in [-1, 1).
       hyper: its learning constants.
+      geom: its geometry, whose whole field the curriculum's shortfall is measured against.
       learns: () bool, the pending step updates the weights.
       cfg: model config.
       speed: only `sparse_layer1` changes the result, and only by float32 rounding.
@@ -68,7 +79,8 @@ def act(state: LearnerState, x: jax.Array, rows: jax.Array, unit, hyper: Hyper, 
         hyper.actor_target_bound,
     )
     cur = state.env.curriculum
-    scale = exploration.value_scale(hyper, out[0], cur.full_at, curriculum.shortfall(cur, cfg), state.env.trial.t)
+    short = curriculum.shortfall(cur, geom)
+    scale = exploration.value_scale(hyper, out[0], cur.full_at, short, state.env.trial.t)
     carried, fresh = exploration.noise(unit, hyper, state.env.trials, cur.full_at, scale, agent.pending.rnd)
     gain = exploration.actor_gain(hyper, scale)
     # The carried part joins the outputs before the torque map, in this order, as the oracle rounds it.
@@ -97,10 +109,10 @@ def learner_step(
     """
     agent, trial = state.agent, state.env.trial
     unit, draws = random_stream.split_uniforms(u, cfg)
-    x = env.observe(state.env, cfg)
+    x = env.observe(state.env, plan.geometry, cfg)
     rows = encoding.coded_support(trial.arm, trial.prev_arm, trial.prev_tau, cfg)
     learns = agent.pending_learning if active is None else active & agent.pending_learning
-    params, out, loss, u1, rnd, gain, tau = act(state, x, rows, unit, hyper, learns, cfg, speed)
+    params, out, loss, u1, rnd, gain, tau = act(state, x, rows, unit, hyper, plan.geometry, learns, cfg, speed)
     params_env = env.env_params(plan, hyper)
     new_env, outcome = env.step(state.env, tau, draws, params_env, cfg)
     pending = _pending(outcome, cfg, x=x, out=out, rnd=rnd, u1=u1, gain=gain)

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from reach_jax.config import Config
+from reach_jax.env.task import Geometry
 
 
 @struct.dataclass
@@ -23,19 +24,19 @@ class Curriculum:
     failure: jax.Array  # () recent share of trials that ended without a clean success, in [0, 1]
 
 
-def bounds(cfg: Config) -> tuple[float, float]:
-    """(initial and minimum, maximum) curriculum distance [m]; the maximum spans the whole field."""
-    return cfg.task.curriculum_init_cells * cfg.sensor.cell_size, cfg.sensor.n_cells * cfg.sensor.cell_size
+def bounds(geom: Geometry) -> tuple[jax.Array, jax.Array]:
+    """(initial and minimum, maximum) curriculum distance [m] of a learner's geometry; the maximum spans its field."""
+    return geom.start_distance, geom.full_distance
 
 
-def shortfall(cur: Curriculum, cfg: Config) -> jax.Array:
+def shortfall(cur: Curriculum, geom: Geometry) -> jax.Array:
     """() how far the distance falls short of the whole field, as a fraction of it: 0 at the whole field."""
-    return 1.0 - cur.distance / bounds(cfg)[1]
+    return 1.0 - cur.distance * geom.inv_full_distance
 
 
-def initial(cfg: Config) -> Curriculum:
+def initial(geom: Geometry, cfg: Config) -> Curriculum:
     """The staircase before the first trial: the initial distance, full from the start only if that spans the field."""
-    distance, full = (jnp.asarray(b) for b in bounds(cfg))
+    distance, full = bounds(geom)
     full_at = jnp.where(distance >= full, 0, -1).astype(jnp.int32)
     return Curriculum(distance=distance, full_at=full_at, failure=jnp.asarray(cfg.task.drift_gate_start, float))
 
@@ -56,6 +57,7 @@ def staircase(
     goal: jax.Array,
     drifted: jax.Array,
     was_full: jax.Array,
+    geom: Geometry,
     cfg: Config,
     early: jax.Array = False,
 ) -> jax.Array:
@@ -71,10 +73,11 @@ def staircase(
       goal: () bool, the trial reached the goal.
       drifted: () bool, the target drifted during the trial.
       was_full: () bool, the distance has reached the whole field at some earlier trial.
+      geom: the learner's geometry, which bounds the distance.
       cfg: model config.
       early: () bool, a drift-aided success is neutral before the first full field too.
     """
-    lo, hi = bounds(cfg)
+    lo, hi = bounds(geom)
     neutral = goal & drifted & ((was_full & cfg.task.drift_neutral_when_full) | early)
     step = jnp.where(goal & ~drifted, cfg.task.curriculum_step, jnp.where(neutral, 0.0, -cfg.task.curriculum_step))
     return jnp.clip(distance + step, lo, hi)
@@ -86,6 +89,7 @@ def after_step(
     goal: jax.Array,
     drifted: jax.Array,
     trials: jax.Array,
+    geom: Geometry,
     cfg: Config,
     early,
     rate: jax.Array,
@@ -99,12 +103,13 @@ def after_step(
       goal: () bool, at the goal.
       drifted: () bool, the ended trial's target drifted.
       trials: () int32 trials ended before this step.
+      geom: the learner's geometry, which bounds the distance.
       cfg: model config.
       early: () bool, hyper `drift_neutral_early`.
       rate: () weight of the ended trial in the failure share (`failure_after`).
     """
     was_full = cur.full_at >= 0
-    distance = jnp.where(ended, staircase(cur.distance, goal, drifted, was_full, cfg, early), cur.distance)
-    first_full = ~was_full & (distance >= bounds(cfg)[1])
+    distance = jnp.where(ended, staircase(cur.distance, goal, drifted, was_full, geom, cfg, early), cur.distance)
+    first_full = ~was_full & (distance >= bounds(geom)[1])
     failure = jnp.where(ended, failure_after(cur.failure, goal, drifted, rate), cur.failure)
     return Curriculum(distance=distance, full_at=jnp.where(first_full, trials + ended, cur.full_at), failure=failure)

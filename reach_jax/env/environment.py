@@ -101,18 +101,23 @@ def start_trial(start: jax.Array, target: jax.Array, force: jax.Array) -> Trial:
     )
 
 
-def observe_trial(trial: Trial, cond: task.Condition, cfg: Config) -> jax.Array:
+def observe_trial(trial: Trial, cond: task.Condition, geom: task.Geometry, cfg: Config) -> jax.Array:
     """(125,) network input: the sensor image and the coded joints, masked by the condition's input mask."""
-    return task.observe(trial.arm, trial.prev_arm, trial.prev_tau, trial.target, cond.input_mask, cfg)
+    return task.observe(trial.arm, trial.prev_arm, trial.prev_tau, trial.target, cond.input_mask, geom, cfg)
 
 
-def observe(state: EnvState, cfg: Config) -> jax.Array:
-    """(125,) network input of the trial under way."""
-    return observe_trial(state.trial, state.cond, cfg)
+def observe(state: EnvState, geom: task.Geometry, cfg: Config) -> jax.Array:
+    """(125,) network input of the trial under way, seen by the learner's geometry `geom`."""
+    return observe_trial(state.trial, state.cond, geom, cfg)
 
 
 def step_trial(
-    trial: Trial, tau: jax.Array, cond: task.Condition, cfg: Config, drift: bool | jax.Array = True
+    trial: Trial,
+    tau: jax.Array,
+    cond: task.Condition,
+    geom: task.Geometry,
+    cfg: Config,
+    drift: bool | jax.Array = True,
 ) -> tuple[Trial, TrialStatus]:
     """The trial one step on under torque `tau` (2,) [N m]; whoever runs it starts a new one when the outcome ends it.
 
@@ -120,6 +125,7 @@ def step_trial(
       trial: the trial.
       tau: applied torques [N m].
       cond: the trial's condition, whose field pushes the hand.
+      geom: the learner's geometry, whose goal square the hand must reach.
       cfg: model config.
       drift: move the target toward the hand once the trial runs long (training), or only where this () bool
         array is True (the drift gate); the tests have no drift (False).
@@ -129,7 +135,7 @@ def step_trial(
     hand = arm.hand_position(moved[:2], cfg.arm)
     out_of_range = arm.is_out(moved, cfg.arm)
     hand_vel = arm.hand_velocity(moved, cfg.arm)
-    goal = task.goal_reached(hand, hand_vel, trial.target, cfg) & ~out_of_range
+    goal = task.goal_reached(hand, hand_vel, trial.target, geom, cfg) & ~out_of_range
     cap = (t >= round(cfg.task.max_trial_time / cfg.arm.dt)) & ~goal & ~out_of_range
     no_drift = drift is False
     target, moved_target = (trial.target, False) if no_drift else task.drift_target(trial.target, hand, t, cfg, drift)
@@ -146,17 +152,17 @@ def next_trial(draws: task.TrialDraws, cur: curriculum.Curriculum, trials: jax.A
       draws: the new trial's uniform draws.
       cur: the curriculum that places it.
       trials: () int32 index of the new trial.
-      plan: the learner's protocol, which picks its condition.
+      plan: the learner's protocol, which picks its condition, and its geometry, which places it.
       cfg: model config.
     """
     cond, block = protocol.trial_condition(plan, trials, draws.catch)
-    start, target, force = task.place_trial(draws, cur.distance, cond.field, cfg)
+    start, target, force = task.place_trial(draws, cur.distance, cond.field, plan.geometry, cfg)
     return start_trial(start, target, force), cond, block
 
 
 def reset(draws: task.TrialDraws, plan: protocol.Plan, cfg: Config) -> EnvState:
     """A learner's environment before its first trial: the initial curriculum and trial 0 of its protocol `plan`."""
-    cur = curriculum.initial(cfg)
+    cur = curriculum.initial(plan.geometry, cfg)
     trials = jnp.array(0, jnp.int32)
     trial, cond, block = next_trial(draws, cur, trials, plan, cfg)
     return EnvState(trial=trial, cond=cond, block=block, curriculum=cur, trials=trials)
@@ -175,10 +181,11 @@ def step(
       cfg: model config.
     """
     gate = curriculum.drift_open(state.curriculum, params.drift_gate)  # the failure share moves only between trials
-    cont, outcome = step_trial(state.trial, tau, state.cond, cfg, gate)
+    geom = params.plan.geometry
+    cont, outcome = step_trial(state.trial, tau, state.cond, geom, cfg, gate)
     done = ended(outcome)
     early, rate, drifted = params.drift_neutral_early, params.failure_rate, state.trial.drifted
-    cur = curriculum.after_step(state.curriculum, done, outcome.goal, drifted, state.trials, cfg, early, rate)
+    cur = curriculum.after_step(state.curriculum, done, outcome.goal, drifted, state.trials, geom, cfg, early, rate)
     trials = state.trials + done
     fresh = next_trial(draws, cur, trials, params.plan, cfg)
     trial, cond, block = jax.tree.map(lambda a, b: jnp.where(done, a, b), fresh, (cont, state.cond, state.block))

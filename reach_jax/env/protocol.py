@@ -1,9 +1,9 @@
 """Protocols as per-learner data: blocks of trials, each in a condition, learning or not, with catch trials (model §12).
 
-A learner's `Plan` holds every condition of the config's table and its blocks. At each trial boundary the
-trial's condition is picked from the block that the trial index falls in; with the block's catch probability the
-trial runs in the catch condition instead. A learner of a plain condition has a one-block plan, so every learner
-of a batch runs the same compiled step whatever its protocol.
+A learner's `Plan` holds every condition of the config's table, its blocks and its task geometry. At each trial
+boundary the trial's condition is picked from the block that the trial index falls in; with the block's catch
+probability the trial runs in the catch condition instead. A learner of a plain condition has a one-block plan, so
+every learner of a batch runs the same compiled step whatever its protocol.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ class Plan:
     catch_cond: jax.Array  # (B,) int32 index of each block's catch condition
     catch: jax.Array  # (B,) probability that a trial of the block is a catch trial
     learning: jax.Array  # (B,) bool: the block updates the weights
+    geometry: task.Geometry  # where the learner's visual field sits, the same in every block
 
 
 def _plan_arrays(blocks: tuple[BlockConfig, ...], n_blocks: int, cfg: Config) -> dict:
@@ -47,16 +48,18 @@ def _plan_arrays(blocks: tuple[BlockConfig, ...], n_blocks: int, cfg: Config) ->
 
 
 def make_plan(name: str, cfg: Config, n_blocks: int | None = None) -> Plan:
-    """Plan of a protocol or a condition (one block) of the config, padded to n_blocks (default its own)."""
+    """Plan of a protocol or a condition (one block) of the config, padded to n_blocks (default its own), in the
+    geometry of the config's sensor (a learner's own: `task.learner_sensor`, in the config it returns)."""
     blocks = blocks_of(cfg, name)
     table = task.stack_conditions([c.name for c in cfg.conditions], cfg)
-    return Plan(conds=table, **_plan_arrays(blocks, n_blocks or len(blocks), cfg))
+    return Plan(conds=table, geometry=task.geometry(cfg), **_plan_arrays(blocks, n_blocks or len(blocks), cfg))
 
 
-def stack_plans(names, cfg: Config) -> Plan:
-    """Batch of plans (leading axis = learner) for a list of protocol or condition names."""
-    n_blocks = max(len(blocks_of(cfg, n)) for n in names)
-    plans = [make_plan(n, cfg, n_blocks) for n in names]
+def stack_plans(names, cfgs: list[Config]) -> Plan:
+    """Batch of plans (leading axis = learner) for a list of protocol or condition names, each in its learner's
+    config (the run's, with the learner's sensor, `task.learner_sensor`)."""
+    n_blocks = max(len(blocks_of(cfg, n)) for n, cfg in zip(names, cfgs, strict=True))
+    plans = [make_plan(n, cfg, n_blocks) for n, cfg in zip(names, cfgs, strict=True)]
     return jax.tree.map(lambda *xs: jnp.stack(xs), *plans)
 
 

@@ -1,6 +1,10 @@
-"""The reaching task: conditions, trial sampling and placement, goal test and target drift (model §2, §5, §6).
+"""The reaching task: conditions, its geometry, trial sampling and placement, goal test and target drift (model §2,
+§5, §6).
 
 Units: positions and distances [m], speeds [m/s], forces [N], time [s]; fields are `fields.Field` data.
+A learner's geometry (`Geometry`: where its visual field sits, its cell, and the lengths counted in cells) is data,
+so that one batch trains several geometries; the config's sensor, moved and scaled by the learner's hyperparameters
+`sensor_dx`, `sensor_dy` and `sensor_scale`, gives it.
 Randomness enters only through uniform draws in [0, 1) (`TrialDraws`), so a NumPy oracle can replay a run.
 The curriculum distance (`curriculum`) bounds the start-target offset in each axis (an L-inf box).
 """
@@ -13,7 +17,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from reach_jax.config import Config, condition
+from reach_jax.config import Config, SensorConfig, condition, workspace
 from reach_jax.physics import arm, encoding, fields, sensor
 
 
@@ -35,6 +39,37 @@ def stack_conditions(names, cfg: Config) -> Condition:
     """Batch of conditions (leading axis = learner) for a list of names."""
     conds = [make_condition(n, cfg) for n in names]
     return jax.tree.map(lambda *xs: jnp.stack(xs), *conds)
+
+
+@struct.dataclass
+class Geometry:
+    """One learner's task geometry: its visual field, and the lengths counted in its cells (model §2, §5)."""
+
+    sensor: sensor.Placement  # where the visual field sits, and its cell
+    goal_half: jax.Array  # () half side of the goal square [m]
+    start_distance: jax.Array  # () initial and smallest curriculum distance [m]
+    full_distance: jax.Array  # () the curriculum distance that spans the whole field [m]
+    inv_full_distance: jax.Array  # () its float32 reciprocal [1/m]: a fraction of it is a product, as XLA made the
+    # division by a constant
+
+
+def learner_sensor(cfg: Config, values: dict) -> SensorConfig:
+    """The sensor of a learner whose hyperparameters are `values` (name -> value, `hyper.Hyper`'s names)."""
+    return workspace.moved_sensor(cfg.sensor, values["sensor_dx"], values["sensor_dy"], values["sensor_scale"])
+
+
+def geometry(cfg: Config) -> Geometry:
+    """The geometry of the config's sensor as data, each length rounded once from float64 as a constant would be."""
+    cell = cfg.sensor.cell_size
+    lengths = (cfg.task.goal_half_width_cells * cell, cfg.task.curriculum_init_cells * cell, cfg.sensor.n_cells * cell)
+    goal_half, start, full = (jnp.asarray(v, dtype=float) for v in lengths)
+    return Geometry(
+        sensor=sensor.placement(cfg.sensor),
+        goal_half=goal_half,
+        start_distance=start,
+        full_distance=full,
+        inv_full_distance=1.0 / full,
+    )
 
 
 class TrialDraws(NamedTuple):
@@ -59,21 +94,21 @@ def draw_trial(key: jax.Array, cfg: Config) -> TrialDraws:
 
 
 def goal_half_width(cfg: Config) -> float:
-    """Half side of the goal square around the target [m]."""
+    """Half side of the goal square around the target [m], for the config's sensor."""
     return cfg.task.goal_half_width_cells * cfg.sensor.cell_size
 
 
-def touching(hand: jax.Array, target: jax.Array, cfg: Config) -> jax.Array:
-    """True when the hand centre lies inside the goal square (side 2 cells) around the target."""
-    return jnp.all(jnp.abs(hand - target) < goal_half_width(cfg), axis=-1)
+def touching(hand: jax.Array, target: jax.Array, goal_half: jax.Array | float) -> jax.Array:
+    """True when the hand centre lies inside the goal square (side 2 cells, half side `goal_half` [m]) of the target."""
+    return jnp.all(jnp.abs(hand - target) < goal_half, axis=-1)
 
 
-def goal_reached(hand: jax.Array, hand_vel: jax.Array, target: jax.Array, cfg: Config) -> jax.Array:
+def goal_reached(hand: jax.Array, hand_vel: jax.Array, target: jax.Array, geom: Geometry, cfg: Config) -> jax.Array:
     """Goal of section 4.2: the hand touches the target and its speed is below cfg.task.goal_speed."""
-    return touching(hand, target, cfg) & (jnp.linalg.norm(hand_vel) < cfg.task.goal_speed)
+    return touching(hand, target, geom.goal_half) & (jnp.linalg.norm(hand_vel) < cfg.task.goal_speed)
 
 
-def place_trial(draws: TrialDraws, distance: jax.Array, field: fields.Field, cfg: Config):
+def place_trial(draws: TrialDraws, distance: jax.Array, field: fields.Field, geom: Geometry, cfg: Config):
     """Start state, target and force of a new trial.
 
     The start is uniform over the field. Each target candidate is uniform over the field intersected
@@ -84,17 +119,18 @@ def place_trial(draws: TrialDraws, distance: jax.Array, field: fields.Field, cfg
       draws: uniform draws of the trial.
       distance: () curriculum distance [m].
       field: the learner's field, which bounds the trial's random force.
+      geom: the learner's geometry: its visual field and goal square.
       cfg: model config.
 
     Returns:
       ((4,) start arm state at rest, (2,) target [m], (2,) the trial's random force [N]).
     """
-    lo, hi = (jnp.asarray(b) for b in sensor.field_bounds(cfg.sensor))
+    lo, hi = geom.sensor.lo, geom.sensor.hi
     start = lo + draws.start * (hi - lo)
     box_lo = jnp.maximum(lo, start - distance)
     box_hi = jnp.minimum(hi, start + distance)
     candidates = box_lo + draws.target * (box_hi - box_lo)
-    ok = ~touching(start, candidates, cfg)
+    ok = ~touching(start, candidates, geom.goal_half)
     first = jnp.where(jnp.any(ok), jnp.argmax(ok), cfg.task.target_candidates - 1)
     target = candidates[first]
     state = jnp.concatenate([arm.inverse_kinematics(start, cfg.arm), jnp.zeros(2)])
@@ -124,7 +160,7 @@ def drift_target(target: jax.Array, hand: jax.Array, step_in_trial: jax.Array, c
     return jnp.where(moved, shifted, target), moved
 
 
-def observe(state, prev_state, prev_tau, target, mask, cfg: Config) -> jax.Array:
-    """Masked (125,) network input from the arm, its previous step and the target."""
-    visual = sensor.render(arm.hand_position(state[:2], cfg.arm), target, cfg.sensor)
+def observe(state, prev_state, prev_tau, target, mask, geom: Geometry, cfg: Config) -> jax.Array:
+    """Masked (125,) network input from the arm, its previous step and the target, seen by `geom`'s visual field."""
+    visual = sensor.render(arm.hand_position(state[:2], cfg.arm), target, geom.sensor, cfg.sensor.n_cells)
     return encoding.encode(visual, state, prev_state, prev_tau, cfg) * mask

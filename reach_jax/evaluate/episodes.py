@@ -68,7 +68,7 @@ def n_steps(cfg: Config) -> int:
 def observation(state, prev, prev_tau, target, start, t, mask, cfg: Config) -> Obs:
     """What a policy sees at arm state `state` (4,), one step after `prev` (4,) under torque `prev_tau` (2,)."""
     return Obs(
-        x=task.observe(state, prev, prev_tau, target, mask, cfg),
+        x=task.observe(state, prev, prev_tau, target, mask, task.geometry(cfg), cfg),
         arm=state,
         hand=arm.hand_position(state[:2], cfg.arm),
         hand_vel=arm.hand_velocity(state, cfg.arm),
@@ -102,7 +102,7 @@ def run_episode(policy, params, mask: jax.Array, field: Field, start: jax.Array,
         trial, done, outcome, steps = carry
         obs = observation(trial.arm, trial.prev_arm, trial.prev_tau, target, start, t, mask, cfg)
         tau = jnp.clip(policy(params, obs), -tau_max, tau_max)
-        moved, result = env.step_trial(trial, tau, cond, cfg, drift=False)
+        moved, result = env.step_trial(trial, tau, cond, task.geometry(cfg), cfg, drift=False)
         ended = (result.out_of_range | result.goal) & ~done
         outcome = jnp.where(ended, jnp.where(result.out_of_range, OUT, SUCCESS), outcome)
         steps = jnp.where(ended, t + 1, steps)

@@ -55,7 +55,7 @@ def test_pairs(cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     pts = lattice_points(cfg)
     starts = np.repeat(pts, len(pts), axis=0)
     targets = np.tile(pts, (len(pts), 1))
-    keep = ~np.asarray(task.touching(jnp.asarray(starts), jnp.asarray(targets), cfg))
+    keep = ~np.asarray(task.touching(jnp.asarray(starts), jnp.asarray(targets), task.goal_half_width(cfg)))
     return starts[keep], targets[keep]
 
 

@@ -136,7 +136,7 @@ def minimum_jerk_episodes(starts: np.ndarray, targets: np.ndarray, cfg: Config) 
     speed = dist[:, None] * minimum_jerk_speed(u)[None] / cfg.eval.reference_duration
     vel = trial_log.unit(targets - starts)[:, None] * speed[..., None]
     goal = np.array(
-        jax.vmap(jax.vmap(lambda h, v, g: task.goal_reached(h, v, g, cfg), in_axes=(0, 0, None)))(
+        jax.vmap(jax.vmap(lambda h, v, g: task.goal_reached(h, v, g, task.geometry(cfg), cfg), in_axes=(0, 0, None)))(
             jnp.asarray(hand), jnp.asarray(vel), jnp.asarray(targets)
         )
     )

@@ -25,7 +25,7 @@ import numpy as np
 from reach_jax.agent import exploration, learner, network
 from reach_jax.config.schema import DEFAULT_SPEED
 from reach_jax.engine import chunk, rollout
-from reach_jax.env import curriculum
+from reach_jax.env import curriculum, task
 from reach_jax.store import checkpoint, run_dir
 
 SATURATED = 0.45  # |f(u)| beyond it is a saturated unit: f'(u) below 0.0475, under a fifth of its peak 0.25
@@ -65,6 +65,7 @@ def probe(s, info, hyper, cfg) -> dict:
     valid = pending.valid.astype(float)
     grads = jax.grad(ts_loss)(layers)
     cur = s.env.curriculum
+    short = curriculum.shortfall(cur, task.geometry(cfg))  # the traced runs see the config's own sensor
     return {
         "p": acts[-1][0],
         "p_target": target[0],
@@ -90,7 +91,7 @@ def probe(s, info, hyper, cfg) -> dict:
         "distance": cur.distance,
         "failure": cur.failure,
         "gate_open": curriculum.drift_open(cur, hyper.drift_gate),
-        "value_scale": exploration.value_scale(hyper, acts[-1][0], cur.full_at, curriculum.shortfall(cur, cfg)),
+        "value_scale": exploration.value_scale(hyper, acts[-1][0], cur.full_at, short),
         "drifted": s.env.trial.drifted,
         "goal": info.goal,
         "out": info.out_of_range,

@@ -100,13 +100,14 @@ def actor_signal(run: Path, condition: str, n_states: int, samples: int, bounds,
 
     def lookahead(state, params, n_max, key):
         cond = state.env.cond
-        out = network.apply(params, env.observe_trial(state.env.trial, cond, cfg), cfg)
+        out = network.apply(params, env.observe_trial(state.env.trial, cond, plan.geometry, cfg), cfg)
         p_now, m = out[0], out[1:]
         cost = cfg.learner.p_range / n_max
 
         def signal(rnd):
-            cont, outcome = env.step_trial(state.env.trial, network.torque(m + rnd, 0.0, cfg), cond, cfg)
-            p_next = network.apply(params, env.observe_trial(cont, cond, cfg), cfg)[0]
+            torque = network.torque(m + rnd, 0.0, cfg)
+            cont, outcome = env.step_trial(state.env.trial, torque, cond, plan.geometry, cfg)
+            p_next = network.apply(params, env.observe_trial(cont, cond, plan.geometry, cfg), cfg)[0]
             p_next = jnp.where(outcome.goal, cfg.learner.reward_goal, p_next)
             p_next = jnp.where(outcome.out_of_range, cfg.learner.reward_out, p_next)
             dp = p_next - p_now
