@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -33,6 +33,20 @@ ADDED_CONFIG_FIELDS = {
     },
     # The elbow stop trained as the clamp before version 13; every run is tested in both frames of the field.
     13: {"arm": {"one_link_stop": False}, "eval": {"frames": ["viscous", "viscous_mirror"]}},
+    # The failure anatomy's thresholds: they describe the fails of a test and change no outcome, so an older run
+    # takes today's.
+    15: {
+        "eval": {
+            "anatomy_window": 1.0,
+            "anatomy_fold_margin_deg": 1.0,
+            "anatomy_fold_share": 0.5,
+            "anatomy_flip_torque": 0.5,
+            "anatomy_chatter_share": 0.5,
+            "anatomy_hover_share": 0.5,
+            "anatomy_rest_speed": 0.05,
+            "anatomy_near_cells": 2.0,
+        }
+    },
 }
 
 # The constant-exploration recipe (versions 1-8 and 10-11) in the fields that versions 9 and 12 changed.
