@@ -13,7 +13,7 @@ import pytest
 
 from reach_jax.config import Config, EvalConfig
 from reach_jax.env.environment import FAIL, OUT, SUCCESS
-from reach_jax.evaluate import anatomy, episodes, lattice
+from reach_jax.evaluate import anatomy, anatomy_report, episodes, lattice
 from reach_jax.evaluate.episodes import Episode, Trajectory
 
 CFG = Config()
@@ -128,6 +128,7 @@ def _movement(outcome, steps, last_window, out_state=None):
 def test_label_movements_reads_outs_at_their_step_and_fails_from_their_window():
     hi = CFG.arm.theta1_range[1]
     rest = window(offset=(0.0, -3 * CELL), speed=0.0)
+    there = window(tau=CHATTER, offset=(0.01, 0.0), speed=0.13)
     ep, traj = _batch(
         [
             _movement(SUCCESS, 30, rest),
@@ -135,12 +136,15 @@ def test_label_movements_reads_outs_at_their_step_and_fails_from_their_window():
             _movement(OUT, 12, rest, out_state=[0.5, -0.05, 0.0, 0.0]),
             _movement(FAIL, T, window(theta2=math.pi)),
             _movement(FAIL, T, rest),
+            _movement(FAIL, T, there),
+            _movement(SUCCESS, 30, there),  # in the goal square, but no fail
         ]
     )
-    labels, steps = anatomy.label_movements(ep, traj, np.tile(TARGET, (5, 1)), TH)
-    names = [anatomy.LABELS[k] for k in labels[0, 0]]
-    assert names == ["success", "theta1_high", "theta2_low", "folded", "rest_far"]
-    assert steps[0, 0].tolist() == [30, 40, 12, T, T]
+    m = anatomy.label_movements(ep, traj, np.tile(TARGET, (7, 1)), TH)
+    names = [anatomy.LABELS[k] for k in m.label[0, 0]]
+    assert names == ["success", "theta1_high", "theta2_low", "folded", "rest_far", "chatter", "success"]
+    assert m.steps[0, 0].tolist() == [30, 40, 12, T, T, T, 30]
+    assert m.in_goal[0, 0].tolist() == [False] * 5 + [True, False]
 
 
 def _labels_of(names):
@@ -155,7 +159,8 @@ def test_a_cells_shares_are_means_over_networks_and_its_composition_is_pooled():
         ]
     )
     steps = np.array([[10, 20, T, 30], [T, T, T, 50]])
-    c = anatomy.cell(labels, steps, "none", "viscous", CFG.arm.dt, 0.95)
+    goal = np.array([[False, False, False, False], [False, True, True, False]])
+    c = anatomy.cell(anatomy.Labelled(labels, steps, goal), "none", "viscous", CFG.arm.dt, 0.95)
     assert c["networks"] == 2 and c["movements"] == 8
     assert c["counts"]["folded"] == 2 and c["counts"]["chatter"] == 2 and c["counts"]["success"] == 2
     assert c["shares"]["success"]["values"] == [0.5, 0.0]
@@ -165,6 +170,7 @@ def test_a_cells_shares_are_means_over_networks_and_its_composition_is_pooled():
     assert c["of_fails"] == {"folded": 0.5, "chatter": 0.5, "hover": 0.0, "rest_near": 0.0, "rest_far": 0.0,
                              "swinging": 0.0}  # fmt: skip
     assert c["of_outs"] == {"theta1_low": 0.0, "theta1_high": 0.5, "theta2_low": 0.5}
+    assert c["fails_in_goal"] == 0.5
     assert c["out_time_s"]["median"] == pytest.approx(40 * CFG.arm.dt) and c["out_time_s"]["n"] == 2
     assert sum(v["mean"] for v in c["shares"].values()) == pytest.approx(1.0)
 
@@ -177,9 +183,10 @@ def test_summarize_names_each_frames_field_viscous_and_reads_its_own_test_column
     labels = np.zeros((4, 3, 6), dtype=np.int8)  # every movement a success ...
     labels[:2, 2, :3] = LABEL["folded"]  # ... but half of the no-field networks' in the mirrored field
     labels[:2, 1, :1] = LABEL["theta2_low"]  # and one in the field as applied
-    steps = np.full(labels.shape, T)
+    steps, goal = np.full(labels.shape, T), labels == LABEL["folded"]
+    goal[0, 2, 0] = False  # one of the six folds out of the goal square
     recipes, recipe_of = [{"lr": 1.0}], [0, 0, 0, 0]
-    result = anatomy.summarize(labels, steps, learners, recipe_of, recipes, CFG)
+    result = anatomy.summarize(anatomy.Labelled(labels, steps, goal), learners, recipe_of, recipes, CFG)
     assert result["frame"] == "viscous_mirror" and set(result["frames"]) == {"viscous"}
     cells = {(c["learning"], c["test"]): c for c in result["recipes"][0]["cells"]}
     assert list(cells) == [("none", "none"), ("none", "viscous"), ("viscous", "none"), ("viscous", "viscous")]
@@ -189,16 +196,24 @@ def test_summarize_names_each_frames_field_viscous_and_reads_its_own_test_column
     assert list(applied) == [("none", "none"), ("none", "viscous")]  # no network trained in that frame's field
     assert applied["none", "viscous"]["counts"]["theta2_low"] == 2
     assert len(result["per_network"]) == 12 and result["per_network"][2]["folded"] == 3
-    line = anatomy.headline(result["recipes"][0]["cells"], "viscous_mirror")
-    assert line.startswith("**Failure anatomy** ([anatomy.md](anatomy.md)), none → viscous_mirror: 50.0% of")
-    assert "(100% folded)" in line and "0.0% go out." in line
-    md = anatomy.markdown(result, "test", few=2)
+    assert result["per_network"][2]["fails_in_goal"] == 2 and result["per_network"][5]["fails_in_goal"] == 3
+    assert result["limits_deg"] == {"theta1_low": 0.0, "theta1_high": 90.0, "theta2_low": 0.0}
+    lines = anatomy_report.headlines(result)
+    assert list(lines) == ["viscous_mirror", "viscous"] and all(len(v) == 1 for v in lines.values())
+    assert lines["viscous_mirror"][0] == (
+        "**Failure anatomy** ([anatomy.md](anatomy.md)), none → viscous_mirror: 50.0% of movements fail (100% folded;"
+        " 83% in the goal square), 0.0% go out."
+    )
+    assert lines["viscous"][0].endswith("16.7% go out (100% θ2 < 0°; median 4.00 s).")
+    md = anatomy_report.markdown(result, "test", few=2)
     rows = [line for line in md.splitlines() if line.startswith("| none → viscous_mirror | 2 | ")]
     assert rows[0] == "| none → viscous_mirror | 2 | 50.0 [50.0, 50.0] |" + " 0.0 [0.0, 0.0] |" * 3 + " – |"  # outs
     assert rows[1].startswith("| none → viscous_mirror | 2 | 50.0 [50.0, 50.0] (100%) | 0.0 [0.0, 0.0] (0%) |")
+    assert rows[1].endswith(" | 83% |")
+    assert "| learning → test | networks | success % | out, θ1 < 0° % | out, θ1 > 90° % | out, θ2 < 0° % |" in md
     assert "## Frame viscous, Recipe 0: lr 1" in md
     assert set(result["thresholds"]) == {f.name for f in dataclasses.fields(EvalConfig) if "anatomy_" in f.name}
-    fig = anatomy.figure(result)
+    fig = anatomy_report.figure(result)
     assert len(fig.axes) == 2
 
 
@@ -231,7 +246,7 @@ def test_scripted_arms_episodes_in_the_null_field_get_their_labels(policy, names
             policy, params, jnp.ones((1, 125)), lattice.test_fields(CFG), starts[pick], targets[pick], CFG
         )
     )
-    labels, _ = anatomy.label_movements(ep, traj, targets[pick], TH)
+    labels = anatomy.label_movements(ep, traj, targets[pick], TH).label
     seen = {anatomy.LABELS[k] for k in labels[:, 0].ravel()}  # without a field (a field drives the flips' swing)
     assert seen <= names and seen
     if policy is _policy_rest:  # near exactly where the hand ends within two cells of the target

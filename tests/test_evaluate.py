@@ -19,7 +19,7 @@ from reach_jax.agent import network
 from reach_jax.config import TRAINED_CONDITIONS, Config, TrainConfig, paper, to_json
 from reach_jax.engine import batch
 from reach_jax.env import task, trial_log
-from reach_jax.evaluate import anatomy, episodes, frames, paper_figures
+from reach_jax.evaluate import anatomy, anatomy_report, episodes, frames, paper_figures
 from reach_jax.evaluate import cli as evaluate_cli
 from reach_jax.evaluate.episodes import Episode
 from reach_jax.physics import arm, sensor
@@ -422,7 +422,7 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
         assert [(c["learning"], c["test"]) for c in cells] == [
             (c["learning"], c["test"]) for c in frames.table_view(t2, frame, CFG)["rows"]
         ]
-        assert anatomy.headline(cells, frame) in claims_md
+        assert anatomy_report.headline(anat, frame, 0) in claims_md
         assert f"## Frame {frame}, Recipe 0" in anatomy_md
     assert claims_md.count("**Failure anatomy**") == len(Config().eval.frames)
 

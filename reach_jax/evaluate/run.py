@@ -18,6 +18,7 @@ from reach_jax.config import Config
 from reach_jax.evaluate import (
     adaptation,
     anatomy,
+    anatomy_report,
     figures,
     frames,
     impedance,
@@ -180,7 +181,7 @@ def evaluate_run(data: run_dir_io.Run) -> Results:
     gains = impedance.measure(policy, params, masks, grid, grid_traj, starts, targets, cfg)
     # Every network's sensor cell sets its goal square in the anatomy: today one for all, per network tomorrow.
     th = anatomy.thresholds(cfg, np.full(len(data.learners), cfg.sensor.cell_size))
-    labels, ended = anatomy.label_movements(grid, grid_traj, targets, th)
+    labelled = anatomy.label_movements(grid, grid_traj, targets, th)
     judged, panels = {}, {}
     for frame in frames.frame_list(cfg):
         v = frames.view(frame, data.learners, recipe_of, cfg)
@@ -196,7 +197,7 @@ def evaluate_run(data: run_dir_io.Run) -> Results:
         "aftereffect": by_frame(judged, "aftereffect"),
         "quality": movement.quality(grid, data.learners, starts, targets, cfg),
         "impedance": {**by_frame(judged, "impedance"), "recipes": recipes, "chunk": data.chunk},
-        "anatomy": {**anatomy.summarize(labels, ended, data.learners, recipe_of, recipes, cfg), "chunk": data.chunk},
+        "anatomy": {**anatomy.summarize(labelled, data.learners, recipe_of, recipes, cfg), "chunk": data.chunk},
         "claims": {"chunk": data.chunk, "trials_per_network": cfg.train.trials, **by_frame(judged, "claims")},
         "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
     }
@@ -246,9 +247,7 @@ def write_judgements(out: Path, table: dict, claims: dict, cfg: Config, source: 
     files.atomic_write_bytes(out / "claims.json", json.dumps(claims, indent=2).encode())
     seen = {f: (frames.table_view(table, f, cfg), decided[f]["recipes"]) for f in decided}
     files.atomic_write_bytes(out / "table2.md", lattice.frames_markdown(seen, source).encode())
-    lines = {}
-    if anat is not None:
-        lines = {f: [anatomy.headline(r["cells"], f) for r in rs] for f, rs in anatomy.by_frame(anat).items()}
+    lines = anatomy_report.headlines(anat) if anat is not None else {}
     files.atomic_write_bytes(out / "claims.md", report.claims_markdown(claims, source, lines).encode())
 
 
@@ -266,7 +265,7 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
     write_judgements(out, res["table2"], res["claims"], cfg, source, res["anatomy"])
     files.atomic_write_bytes(out / "quality.md", movement.quality_markdown(res["quality"], source).encode())
     few = cfg.claims.informative_networks
-    files.atomic_write_bytes(out / "anatomy.md", anatomy.markdown(res["anatomy"], source, few).encode())
+    files.atomic_write_bytes(out / "anatomy.md", anatomy_report.markdown(res["anatomy"], source, few).encode())
     pngs = Figures(out)
     pngs.draw("impedance.png", figures.impedance, res["impedance"], fig.gains, data.learners, cfg)
     first = next(iter(fig.panels))
@@ -275,7 +274,7 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
         pngs.draw(name, paper_figures.fig4, fig.panels[frame], fig.starts, fig.targets, fig.start_corner, cfg)
     pngs.draw("fig5.png", paper_figures.fig5, fig.panels[first], fig.start_corner, cfg)
     pngs.draw("learning_curves.png", figures.learning_curves, data.metrics, cfg)
-    pngs.draw("anatomy.png", anatomy.figure, res["anatomy"])
+    pngs.draw("anatomy.png", anatomy_report.figure, res["anatomy"])
     if res["adaptation"] is not None:
         files.atomic_write_bytes(out / "adaptation.json", json.dumps(res["adaptation"], indent=2).encode())
         files.atomic_write_bytes(out / "adaptation.md", adaptation.markdown(res["adaptation"], source).encode())
