@@ -17,9 +17,10 @@ seconds, the first class that fits in the order of `FAIL_CLASSES`:
             anatomy_near_cells cells (L-inf) of the target;
   rest_far  at rest, farther away;
   swinging  none of these: the hand still moves at the end.
-A cell's shares are each network's fraction of its movements with the label, as a mean over networks with a
-t-interval on the logit scale (`stats.rate_ci`), and the pooled composition of the cell's outs and fails.
-`anatomy_report` writes them in words and draws them.
+Beside its class, a fail whose hand stayed in the goal square by the hover rule is marked (`in_goal`). A cell's
+shares are each network's fraction of its movements with the label, as a mean over networks with a t-interval on
+the logit scale (`stats.rate_ci`), and the pooled composition of the cell's outs and fails. `anatomy_report`
+writes them in words and draws them.
 """
 
 from __future__ import annotations
@@ -208,7 +209,8 @@ def cell(m: Labelled, learning: str, test: str, dt: float, level: float) -> dict
     total = {name: int(counts[:, k].sum()) for k, name in enumerate(LABELS)}
     outs, fails = sum(total[k] for k in OUT_LIMITS), sum(total[k] for k in FAIL_CLASSES)
     times = m.steps[(labels >= 1) & (labels <= len(OUT_LIMITS))] * dt
-    quartiles = [float(q) for q in np.percentile(times, [25, 50, 75])] if times.size else [None] * 3
+    # Rounded to the microsecond: steps x dt leaves float noise (0.5800000000000001) in the JSON.
+    quartiles = [round(float(q), 6) for q in np.percentile(times, [25, 50, 75])] if times.size else [None] * 3
     return {
         "learning": learning,
         "test": test,
