@@ -19,8 +19,8 @@ from reach_jax.agent import network
 from reach_jax.config import TRAINED_CONDITIONS, Config, TrainConfig, paper, to_json
 from reach_jax.engine import batch
 from reach_jax.env import task, trial_log
+from reach_jax.evaluate import anatomy, anatomy_report, episodes, frames, paper_figures
 from reach_jax.evaluate import cli as evaluate_cli
-from reach_jax.evaluate import episodes, frames, paper_figures
 from reach_jax.evaluate.episodes import Episode
 from reach_jax.physics import arm, sensor
 from reach_jax.store import checkpoint
@@ -408,7 +408,26 @@ def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys)
         assert f"| {cell['learning']} → {cell['test']} | {counts} | {straight} |" in qmd
     assert "| minimum jerk, " in qmd and "| 1040/1040 | 0.000 |" in qmd
 
-    for name in ("fig4.png", "fig5.png", "learning_curves.png"):
+    # The failure anatomy: every movement of a cell labelled, outs and fails as Table 2 counts them, in each frame.
+    anat = json.loads((out / "anatomy.json").read_text())
+    counted = {(r["learner"], r["test"]): r for r in t2["per_network"]}
+    assert len(anat["per_network"]) == len(t2["per_network"])
+    for r in anat["per_network"]:
+        want = counted[r["learner"], r["test"]]
+        assert r["success"] == want["success"]
+        assert sum(r[k] for k in anatomy.OUT_LIMITS) == want["out"]
+        assert sum(r[k] for k in anatomy.FAIL_CLASSES) == want["fail"]
+    claims_md, anatomy_md = (out / "claims.md").read_text(), (out / "anatomy.md").read_text()
+    for frame, recipes in anatomy.by_frame(anat).items():
+        cells = recipes[0]["cells"]
+        assert [(c["learning"], c["test"]) for c in cells] == [
+            (c["learning"], c["test"]) for c in frames.table_view(t2, frame, CFG)["rows"]
+        ]
+        assert anatomy_report.headline(anat, frame, 0) in claims_md
+        assert f"## Frame {frame}, Recipe 0" in anatomy_md
+    assert claims_md.count("**Failure anatomy**") == len(Config().eval.frames)
+
+    for name in ("fig4.png", "fig5.png", "learning_curves.png", "anatomy.png"):
         img = matplotlib.image.imread(out / name)
         assert img.ndim == 3 and min(img.shape[:2]) > 300
         assert img[..., :3].std() > 0.05  # not a blank canvas
@@ -462,7 +481,14 @@ def test_a_second_evaluation_rewrites_no_figure_and_changed_data_redraw_theirs(t
         return {p.name: (p.read_bytes(), p.stat().st_mtime_ns, p.stat().st_ino) for p in out.glob("*.png")}
 
     first = pngs()
-    assert set(first) == {"impedance.png", "fig4.png", f"fig4_{OTHER_FRAME}.png", "fig5.png", "learning_curves.png"}
+    assert set(first) == {
+        "impedance.png",
+        "fig4.png",
+        f"fig4_{OTHER_FRAME}.png",
+        "fig5.png",
+        "learning_curves.png",
+        "anatomy.png",
+    }
     assert set(json.loads((out / evaluate.FIGURE_DIGESTS).read_text())) == set(first)
     run = run_dir_io.load(tiny_run)
     results = evaluate.evaluate_run(run)  # a second evaluation of the same run, as `evaluate` makes it

@@ -33,10 +33,22 @@ ADDED_CONFIG_FIELDS = {
     },
     # The elbow stop trained as the clamp before version 13; every run is tested in both frames of the field.
     13: {"arm": {"one_link_stop": False}, "eval": {"frames": ["viscous", "viscous_mirror"]}},
-    # The task's geometry as per-learner data: every learner of an older run sees the visual field of its sensor.
+    # Version 15: the task's geometry as per-learner data (every learner of an older run sees the visual field of its
+    # sensor), and the failure anatomy's thresholds (they describe the fails of a test and change no outcome, so an
+    # older run takes today's).
     15: {
         "learner": {"sensor_dx": 0.0, "sensor_dy": 0.0, "sensor_scale": 1.0},
         "train": {"sensor_dx_grid": [], "sensor_dy_grid": [], "sensor_scale_grid": []},
+        "eval": {
+            "anatomy_window": 1.0,
+            "anatomy_fold_margin_deg": 1.0,
+            "anatomy_fold_share": 0.5,
+            "anatomy_flip_torque": 0.5,
+            "anatomy_chatter_share": 0.5,
+            "anatomy_hover_share": 0.5,
+            "anatomy_rest_speed": 0.05,
+            "anatomy_near_cells": 2.0,
+        },
     },
 }
 

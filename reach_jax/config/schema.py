@@ -138,6 +138,17 @@ class EvalConfig:
     # as the paper's viscous row; the first frame is the one the run's main files judge (docs/claims.md).
     frames: tuple[str, ...] = ("viscous_mirror", "viscous")
     adaptation_window: int = 1000  # adaptation windows and curve bins span this many trials (choice)
+    # The failure anatomy (`evaluate.anatomy`, docs/claims.md): a fail's class is read from its last
+    # anatomy_window seconds, the first class that fits in the order folded, chatter, hover, rest near, rest far,
+    # swinging. They change no outcome, only how the fails are described (choices).
+    anatomy_window: float = 1.0  # the last second of the 4 s decides a fail's class [s]
+    anatomy_fold_margin_deg: float = 1.0  # the elbow this close to its stop (theta2_stop) is on it [deg]
+    anatomy_fold_share: float = 0.5  # folded: the elbow on its stop in at least this share of the window's states
+    anatomy_flip_torque: float = 0.5  # a sign flip counts when the torque exceeds this before and after it [N m]
+    anatomy_chatter_share: float = 0.5  # chatter: a joint's torque flips sign in at least this share of the steps
+    anatomy_hover_share: float = 0.5  # hover: the hand inside the goal square in at least this share of the states
+    anatomy_rest_speed: float = 0.05  # at rest: the hand's mean speed over the window below this [m/s]
+    anatomy_near_cells: float = 2.0  # rest near: the hand ends within this L-inf distance of the target [cells]
 
 
 @dataclass(frozen=True)

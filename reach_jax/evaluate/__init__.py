@@ -1,8 +1,9 @@
 """Table-2 test protocol, Fig. 4-5 movements, after-effect and movement quality (section 4.4, model §8-10).
 
 `evaluate(run_dir)` (or `python -m reach_jax.evaluate RUN_DIR`) loads the newest checkpoint of a run and writes
-RUN_DIR/eval/: table2.json, table2.md, fig4.png, fig5.png, aftereffect.json, quality.json and learning_curves.png;
-figures.json keeps the digest of each PNG's data, so that a figure is drawn again only when its data changed.
+RUN_DIR/eval/: table2.json, table2.md, fig4.png, fig5.png, aftereffect.json, quality.json, anatomy.json, .md, .png
+and learning_curves.png; figures.json keeps the digest of each PNG's data, so that a figure is drawn again only
+when its data changed.
 
 Units: positions [m] in the shoulder frame, speeds [m/s], times [s], angles in the JSON files [deg]
 (directions measured counter-clockwise from +x), torques [N m]. Trial lengths are steps of cfg.arm.dt.
@@ -17,9 +18,10 @@ The evaluator is policy-agnostic: a policy is any function (params, Obs) -> (2,)
 the evaluator to +-tau_max (the actuator limit of Table 1). The network policy uses only Obs.x, the
 masked 125-input, and applies the actor without noise: tau = network.torque(m, 0).
 
-Modules: `lattice` (the 1040 test pairs, outcome counts, Table 2), `pulls` (the after-effect), `movement`
-(movement quality), `verdicts` (the claims), `run` (the evaluation of a run and its files), `compare` (evaluated
-runs side by side, `python -m reach_jax.evaluate.compare RUN...`). Fig. 4 movements: the start and the target are
+Modules: `lattice` (the 1040 test pairs, outcome counts, Table 2), `anatomy` and `anatomy_report` (where each out
+and fail ends, per cell), `pulls` (the after-effect), `movement` (movement quality), `verdicts` (the claims), `run`
+(the evaluation of a run and its files), `compare` (evaluated runs side by side, `python -m
+reach_jax.evaluate.compare RUN...`). Fig. 4 movements: the start and the target are
 two of the centres of the four corner cells of the sensor, all 12 ordered pairs (`paper_figures`).
 """
 

@@ -67,20 +67,26 @@ def _paper_fmt(name: str, value: float) -> str:
     return _fmt(name, {"mean": value})
 
 
-def claims_markdown(result: dict, source: str) -> str:
+def claims_markdown(result: dict, source: str, anatomy: dict | None = None) -> str:
     """claims.json as Markdown: per frame of the field and recipe, the five claims with their numbers and verdicts,
-    then the checks."""
+    then the checks and the failure anatomy's line.
+
+    Args:
+        result: claims.json's record.
+        source: the run and chunk named in the title.
+        anatomy: {frame: one line per recipe} of the failure anatomy (`anatomy.headline`); none where absent.
+    """
     lines = [f"# The paper's claims — {source}", ""]
     judged = {result.get("frame"): result, **result.get("frames", {})}
     if len(judged) > 1:
         lines += [frames.FRAMES_WORDS, ""]
     for frame, decided in judged.items():
-        lines += _recipe_sections(decided["recipes"], frame)
+        lines += _recipe_sections(decided["recipes"], frame, (anatomy or {}).get(frame, []))
     return "\n".join(lines)
 
 
-def _recipe_sections(recipes: list[dict], frame: str | None) -> list[str]:
-    """One frame's claims, a section per recipe."""
+def _recipe_sections(recipes: list[dict], frame: str | None, anatomy: list[str]) -> list[str]:
+    """One frame's claims, a section per recipe, each with its line of `anatomy` where there is one."""
     lines = []
     for k, recipe in enumerate(recipes):
         name = ", ".join(f"{key} {v:g}" for key, v in recipe["hypers"].items())
@@ -96,6 +102,7 @@ def _recipe_sections(recipes: list[dict], frame: str | None) -> list[str]:
             "",
             *_checks(recipe),
             "",
+            *([anatomy[k], ""] if k < len(anatomy) else []),
             *_damping_table(recipe, frame),
             "",
         ]

@@ -17,6 +17,8 @@ import numpy as np
 from reach_jax.config import Config
 from reach_jax.evaluate import (
     adaptation,
+    anatomy,
+    anatomy_report,
     figures,
     frames,
     impedance,
@@ -35,7 +37,7 @@ from reach_jax.store import run_dir as run_dir_io
 from reach_jax.store.checkpoint import CheckpointError
 
 EVAL_DIR = "eval"
-RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "claims")  # each written as NAME.json
+RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "anatomy", "claims")  # each written as NAME.json
 
 
 @dataclasses.dataclass(frozen=True)
@@ -177,6 +179,9 @@ def evaluate_run(data: run_dir_io.Run) -> Results:
     for row in table["per_network"]:
         row.update(recipes[row["recipe"]])
     gains = impedance.measure(policy, params, masks, grid, grid_traj, starts, targets, cfg)
+    # Every network's sensor cell sets its goal square in the anatomy: today one for all, per network tomorrow.
+    th = anatomy.thresholds(cfg, np.full(len(data.learners), cfg.sensor.cell_size))
+    labelled = anatomy.label_movements(grid, grid_traj, targets, th)
     judged, panels = {}, {}
     for frame in frames.frame_list(cfg):
         v = frames.view(frame, data.learners, recipe_of, cfg)
@@ -192,6 +197,7 @@ def evaluate_run(data: run_dir_io.Run) -> Results:
         "aftereffect": by_frame(judged, "aftereffect"),
         "quality": movement.quality(grid, data.learners, starts, targets, cfg),
         "impedance": {**by_frame(judged, "impedance"), "recipes": recipes, "chunk": data.chunk},
+        "anatomy": {**anatomy.summarize(labelled, data.learners, recipe_of, recipes, cfg), "chunk": data.chunk},
         "claims": {"chunk": data.chunk, "trials_per_network": cfg.train.trials, **by_frame(judged, "claims")},
         "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
     }
@@ -203,7 +209,8 @@ def redecide(run_dir: Path) -> dict:
 
     For a change in how claims are decided (the statistics, the criteria's presentation): the test episodes
     round differently in float32 on another CPU, where a few of a network's 2080 movements can change outcome.
-    Rewrites eval/claims.json, claims.md and table2.md; returns the new claims results.
+    Rewrites eval/claims.json, claims.md and table2.md; returns the new claims results. claims.md carries the
+    failure anatomy's line where eval/anatomy.json exists (evaluations before it have none).
     """
     run_dir = Path(run_dir)
     out = run_dir / EVAL_DIR
@@ -227,17 +234,21 @@ def redecide(run_dir: Path) -> dict:
         per_seed = afters[frame].get("per_seed", [])
         judged[frame] = judge(v, table, per_seed, imps[frame], imp["recipes"], metrics)
     result = {"chunk": table["chunk"], "trials_per_network": cfg.train.trials, **by_frame(judged, "claims")}
-    write_judgements(out, table, result, cfg, f"{run_dir} (chunk {table['chunk']})")
+    anatomy_path = out / "anatomy.json"
+    anat = json.loads(anatomy_path.read_text()) if anatomy_path.is_file() else None
+    write_judgements(out, table, result, cfg, f"{run_dir} (chunk {table['chunk']})", anat)
     return result
 
 
-def write_judgements(out: Path, table: dict, claims: dict, cfg: Config, source: str) -> None:
-    """Write claims.json, and table2.md and claims.md with a section for each frame."""
+def write_judgements(out: Path, table: dict, claims: dict, cfg: Config, source: str, anat: dict | None) -> None:
+    """Write claims.json, and table2.md and claims.md with a section for each frame (with the failure anatomy's
+    line per recipe from `anat`, anatomy.json's record, where there is one)."""
     decided = {claims["frame"]: claims, **claims["frames"]}
     files.atomic_write_bytes(out / "claims.json", json.dumps(claims, indent=2).encode())
     seen = {f: (frames.table_view(table, f, cfg), decided[f]["recipes"]) for f in decided}
     files.atomic_write_bytes(out / "table2.md", lattice.frames_markdown(seen, source).encode())
-    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(claims, source).encode())
+    lines = anatomy_report.headlines(anat) if anat is not None else {}
+    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(claims, source, lines).encode())
 
 
 def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Path | None = None) -> Path:
@@ -251,8 +262,10 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
     for name in (n for n in RESULT_FILES if n != "claims"):
         files.atomic_write_bytes(out / f"{name}.json", json.dumps(res[name], indent=2).encode())
     source = f"{run_dir} (chunk {data.chunk})"
-    write_judgements(out, res["table2"], res["claims"], cfg, source)
+    write_judgements(out, res["table2"], res["claims"], cfg, source, res["anatomy"])
     files.atomic_write_bytes(out / "quality.md", movement.quality_markdown(res["quality"], source).encode())
+    few = cfg.claims.informative_networks
+    files.atomic_write_bytes(out / "anatomy.md", anatomy_report.markdown(res["anatomy"], source, few).encode())
     pngs = Figures(out)
     pngs.draw("impedance.png", figures.impedance, res["impedance"], fig.gains, data.learners, cfg)
     first = next(iter(fig.panels))
@@ -261,6 +274,7 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
         pngs.draw(name, paper_figures.fig4, fig.panels[frame], fig.starts, fig.targets, fig.start_corner, cfg)
     pngs.draw("fig5.png", paper_figures.fig5, fig.panels[first], fig.start_corner, cfg)
     pngs.draw("learning_curves.png", figures.learning_curves, data.metrics, cfg)
+    pngs.draw("anatomy.png", anatomy_report.figure, res["anatomy"])
     if res["adaptation"] is not None:
         files.atomic_write_bytes(out / "adaptation.json", json.dumps(res["adaptation"], indent=2).encode())
         files.atomic_write_bytes(out / "adaptation.md", adaptation.markdown(res["adaptation"], source).encode())
@@ -272,8 +286,8 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
 def evaluate(run_dir: Path, checkpoint_path: Path | None = None, out: Path | None = None) -> dict:
     """Evaluate a run at its newest (or the given) checkpoint and write every file into `out` (default RUN_DIR/eval).
 
-    Returns the JSON-ready results, keyed by file: table2, aftereffect, quality, impedance, claims, and adaptation
-    (None for a run without protocol learners and a per-trial log).
+    Returns the JSON-ready results, keyed by file: table2, aftereffect, quality, impedance, anatomy, claims, and
+    adaptation (None for a run without protocol learners and a per-trial log).
     Raises CheckpointError (one line, naming the bad file) before anything is written.
     """
     run = run_dir_io.load(run_dir, checkpoint_path)
