@@ -1,6 +1,7 @@
 """The command line `python -m reach_jax.evaluate`: a run directory in, its eval/ files out (`evaluate.evaluate_run`).
 
-Every user error prints one line, "prog: error: message", and exits 2 with nothing written.
+Every user error prints one line, "prog: error: message", and exits 2 with nothing written. An evaluation ends with
+one screen (`report.summary_text`): the claims' verdicts, D and the paper's plausibility, the files to open.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 from reach_jax import evaluate
 from reach_jax.engine import distribute
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line, printable
-from reach_jax.evaluate import animation
+from reach_jax.evaluate import animation, report
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.store import run_lock
 from reach_jax.store.checkpoint import CheckpointError
@@ -49,8 +50,10 @@ def main(argv=None) -> int:
         if args.claims_only:
             if args.checkpoint or args.out:
                 raise UsageError("--claims-only reads and rewrites RUN_DIR/eval: no --checkpoint or --out")
-            evaluate.redecide(args.run_dir)
-            print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
+            claims = evaluate.redecide(args.run_dir)
+            out = Path(args.run_dir) / evaluate.EVAL_DIR
+            print(report.summary_text({"claims": claims}, args.run_dir, out), file=sys.stderr)
+            print(f"claims decided again in {out}", file=sys.stderr)
             return 0
         distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
         if args.animate is not None:
@@ -75,5 +78,6 @@ def main(argv=None) -> int:
     except OSError as exc:
         sys.stderr.write(error_line(parser.prog, f"{out}: write failed ({exc})"))
         return EXIT_IO
+    print(report.summary_text(results.json, args.run_dir, out), file=sys.stderr)
     print(f"evaluation written to {out}", file=sys.stderr)
     return 0
