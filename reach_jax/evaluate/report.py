@@ -202,7 +202,7 @@ def _few_words(recipe: dict) -> str:
 
 
 SHORT = {"holds": "holds", "holds in part": "part", "does not hold": "no"}  # a verdict in a few letters
-SUMMARY_SECTIONS = 6  # frame x recipe sections on the closing screen; claims.md and compare have the rest
+SUMMARY_SECTIONS = 4  # frame x recipe sections on the closing screen; claims.md and compare have the rest
 # The files worth opening first, in order, with what each shows; those the evaluation wrote are listed.
 SUMMARY_FILES = {
     "table2.md": "Table 2 beside the paper's, with our pairs' ranges",
@@ -231,14 +231,13 @@ def summary_text(results: dict, run_dir: Path, out: Path) -> str:
     for frame, k, recipe in sections[:SUMMARY_SECTIONS]:
         verdicts = " · ".join(f"{c['claim']} {SHORT[c['verdict']]}" for c in recipe["claims"]) or "none decided"
         cells, near = paper_cells(recipe["cells"])
+        collapsed = f"; {len(recipe['collapsed'])} networks collapsed" if recipe.get("collapsed") else ""
         lines += [
             f"{frames.heading(frame)}recipe {k} ({recipe['networks_per_condition']} networks a condition): "
-            f"claims {verdicts}",
+            f"claims {verdicts}{collapsed}",
             f"  Table 2: {len(near)} of {len(cells)} cells near the paper" + _plausible_cells(recipe),
             "  " + _plausible_table(recipe),
         ]
-        if recipe.get("collapsed"):
-            lines.append(f"  collapsed: {collapse.names(recipe['collapsed'])}")
     if len(sections) > SUMMARY_SECTIONS:
         lines.append(f"… and {len(sections) - SUMMARY_SECTIONS} more frame and recipe sections in claims.md")
     if isinstance(results.get("anatomy"), dict) and "headline" in results["anatomy"]:
