@@ -4,7 +4,8 @@
     python studies/search/objective.py runs/heldout          # D of the default's held-out run: 24.4
 
 D is the mean over the paper's 8 Table-2 cells of |success − paper| + |out − paper| in percentage points, a
-recipe's success and out in a cell being the means over its networks of each network's rate (`eval/claims.json`).
+recipe's success and out in a cell being the means over its networks of each network's rate (`eval/claims.json`;
+`reach_jax.evaluate.plausibility.distance`).
 Ranked by D; recipes within TIE_POINTS of each other by stable share, then by fewer knobs off their defaults.
 Beside D: the claims' verdicts, the cells near the paper, the stable share, the no-field damping along the field's
 unstable axis and the time ratio of none → viscous to none → none. With --out, writes OUT.md and OUT.json.
