@@ -27,6 +27,7 @@ RATES = ("success", "out")  # the rates D and the cells' plausibility compare
 MIN_NETWORKS = PAPER_NETWORKS + 1  # a pair needs at least one network left out to be measured against
 MAX_TABLES = 1 << 20  # pair tables enumerated before a seeded sample of this many is drawn instead
 SAMPLE_SEED = 0  # the sample's seed, so that a verdict is the same on every machine
+EDGE = 1e-12  # a paper rate equal to a range's end (both counts over 2080) lies inside it, whatever the rounding
 
 
 def distance(cells: list[dict]) -> float | None:
@@ -122,7 +123,7 @@ def judge(cells: list[dict], level: float) -> dict | None:
             low, high, how = pair_range(inside, level)
             ranges.add(how)
             paper = c["paper"][k]
-            row[k] = {"paper": paper, "low": low, "high": high, "inside": bool(low - 1e-12 <= paper <= high + 1e-12)}
+            row[k] = {"paper": paper, "low": low, "high": high, "inside": bool(low - EDGE <= paper <= high + EDGE)}
             terms[c["learning"]] = terms[c["learning"]] + np.abs(inside - rest) * 100
         row["plausible"] = all(row[k]["inside"] for k in RATES)
         rows.append(row)
