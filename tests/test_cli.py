@@ -297,9 +297,10 @@ def test_runs_under_two_spellings_are_one_run_bit_for_bit_and_resume_under_each_
     a, b = tmp_path / "a", tmp_path / "b"
     assert train_cli.main([*argv, *flags, "--out", str(a)]) == 0
     # The summary names the learners in trouble (tests/test_collapse.py), even with --quiet.
-    assert capsys.readouterr().err.splitlines()[-2:] == [
+    assert capsys.readouterr().err.splitlines()[-3:] == [
         "python -m reach_jax.train: no learner collapsed or fell back",
         f"run written to {a}",
+        f"evaluate it: python -m reach_jax.evaluate {a}",
     ]
     assert train_cli.main([*argv, *sets, "--out", str(b)]) == 0
     assert (a / run_dir_io.CONFIG_FILE).read_bytes() == (b / run_dir_io.CONFIG_FILE).read_bytes()

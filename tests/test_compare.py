@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from reach_jax.config import hyper
-from reach_jax.evaluate import compare
+from reach_jax.evaluate import compare, plausibility
 
 ROOT = Path(__file__).resolve().parent.parent
 RUNS = [ROOT / "runs" / name for name in ("heldout", "dev_value_half", "screen2")]
@@ -82,3 +82,18 @@ def test_the_cells_near_the_paper_are_counted_over_the_cells_it_has(tmp_path):
     (tmp_path / compare.CLAIMS).write_text(json.dumps(data))
     got = compare.recipe_rows(tmp_path)[0]
     assert (got["cells_near"], got["cells"]) == (want["cells_near"], want["cells"]) == (3, 8)
+
+
+def test_each_row_carries_d_and_the_papers_plausibility(load_tool, capsys):
+    objective = load_tool("studies/search/objective")
+    rows = compare.recipe_rows(RUNS[0])
+    # The first frame's D is the search's objective (studies/search/objective.py reads the file's top level).
+    assert rows[0]["D"] == objective.records(RUNS[0])[0]["D"]
+    data = json.loads((RUNS[0] / compare.CLAIMS).read_text())
+    for row, decided in zip(rows, (data, *data["frames"].values()), strict=True):
+        record = plausibility.judge(decided["recipes"][0]["cells"], 0.95)  # evaluated before plausibility was
+        assert (row["plausible_cells"], row["plausible"]) == (record["plausible_cells"], record["plausible"])
+    assert compare.main([str(RUNS[0]), str(RUNS[2])]) == 0
+    lines = [line.split(" | ") for line in capsys.readouterr().out.splitlines() if line.startswith("| `")]
+    assert lines[0][12:14] == [f"{rows[0]['D']:.1f}", f"{rows[0]['plausible_cells']}/8, table no"]
+    assert [line[13] for line in lines[2:]] == ["0/4, table yes", "0/4, table yes", "0/4, table no", "0/4, table no"]

@@ -363,6 +363,14 @@ def test_quality_markdown_marks_a_cell_without_successes():
 def test_end_to_end_writes_every_file_with_the_promised_shapes(tiny_run, capsys):
     assert evaluate_cli.main([str(tiny_run)]) == 0
     out = tiny_run / evaluate.EVAL_DIR
+    # One closing screen: the claims of each frame, D (one network a condition: no plausibility), what to open.
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == f"evaluation written to {out}"
+    assert err[-2].startswith("Next: python -m reach_jax.evaluate.compare")
+    assert err[0] == f"{tiny_run} at chunk {checkpoint.checkpoint_chunk(checkpoint.list_checkpoints(tiny_run)[-1])}:"
+    assert [line.split(",")[0] for line in err if line.startswith("Frame ")] == [f"Frame {f}" for f in CFG.eval.frames]
+    assert sum("D " in line and "(plausibility needs 3 networks)" in line for line in err) == len(CFG.eval.frames)
+    assert f"  {out / 'table2.md'}" in "\n".join(err) and len(err) < 25
     networks = len(batch.learner_table(run_dir_io.read_config(tiny_run).train))
 
     t2 = json.loads((out / "table2.json").read_text())
@@ -460,8 +468,11 @@ def test_claims_only_decides_the_committed_files_again_as_the_full_evaluation_di
     for name in full:
         (out / name).unlink()
     before = {p.name: p.read_bytes() for p in out.iterdir()}
+    capsys.readouterr()
     assert evaluate_cli.main([str(copy), "--claims-only"]) == 0
     assert {n: (out / n).read_bytes() for n in full} == full  # the same verdicts, byte for byte
+    err = capsys.readouterr().err.splitlines()  # the closing screen of the claims decided again
+    assert err[-1] == f"claims decided again in {out}" and err[0].startswith(f"{copy} at chunk ")
     assert {p.name: p.read_bytes() for p in out.iterdir() if p.name not in full} == before  # nothing else touched
     # Without the evaluation's files it is a one-line error, and it takes no other output folder.
     assert evaluate_cli.main([str(tiny_run), "--claims-only", "--out", str(tmp_path / "x")]) == errors.EXIT_USAGE

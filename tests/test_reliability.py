@@ -107,16 +107,17 @@ def test_evaluate_says_that_a_run_is_live_and_reads_a_whole_checkpoint(live_run,
     proc, out = live_run
     evaluated = []
     # The episodes and files are test_evaluate's; here only what is read from the live run matters.
-    monkeypatch.setattr(evaluate, "evaluate_run", lambda run: evaluated.append(run) or "results")
+    monkeypatch.setattr(evaluate, "evaluate_run", lambda run: evaluated.append(run) or evaluate.Results({}, None))
     monkeypatch.setattr(evaluate, "write_results", lambda *args: None)
+    monkeypatch.setattr(evaluate_cli.report, "summary_text", lambda *args: "the closing screen")
     assert evaluate_cli.main([str(out), "--out", str(tmp_path / "eval")]) == 0
-    note, written = capsys.readouterr().err.splitlines()
+    note, summary, written = capsys.readouterr().err.splitlines()
     (run,) = evaluated
     assert note == (
         f"python -m reach_jax.evaluate: {out} is still training (PID {proc.pid} on host {HOST}); "
         f"evaluating its checkpoint after chunk {run.chunk}"
     )
-    assert run.chunk >= 2 and written.startswith("evaluation written")
+    assert run.chunk >= 2 and summary == "the closing screen" and written.startswith("evaluation written")
     assert max(r["chunk"] for r in run.metrics) == run.chunk
 
 

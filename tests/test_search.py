@@ -12,6 +12,7 @@ import pytest
 
 from reach_jax.config import hyper, loading, paper
 from reach_jax.engine import batch
+from reach_jax.evaluate import plausibility
 from reach_jax.store import run_dir
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -82,6 +83,7 @@ def test_distance_is_the_mean_over_the_papers_cells_of_both_gaps_in_points(objec
     cells = [_cell("none", "none", 0.6, 0.25), _cell("none", "viscous", 0.3, 0.55), _cell("x", "y", 0, 1, None)]
     # (10 + 0) and (20 + 30) points over the two cells the paper has; the third has no paper value.
     assert objective.distance(cells) == pytest.approx(30.0)
+    assert objective.distance is plausibility.distance  # the library's D, which claims.json and compare carry
 
 
 def test_the_objective_agrees_with_the_paper_counts_and_the_per_network_table(objective):

@@ -19,10 +19,11 @@ the evaluator to +-tau_max (the actuator limit of Table 1). The network policy u
 masked 125-input, and applies the actor without noise: tau = network.torque(m, 0).
 
 Modules: `lattice` (the 1040 test pairs, outcome counts, Table 2), `anatomy` and `anatomy_report` (where each out
-and fail ends, per cell), `pulls` (the after-effect), `movement` (movement quality), `verdicts` (the claims), `run`
-(the evaluation of a run and its files), `compare` (evaluated runs side by side, `python -m
-reach_jax.evaluate.compare RUN...`). Fig. 4 movements: the start and the target are
-two of the centres of the four corner cells of the sensor, all 12 ordered pairs (`paper_figures`).
+and fail ends, per cell), `pulls` (the after-effect), `movement` (movement quality), `verdicts` (the claims),
+`plausibility` (D, and the paper as a two-network draw from ours), `run` (the evaluation of a run and its files),
+`report` (the claims in Markdown and the command's closing screen), `compare` (evaluated runs side by side,
+`python -m reach_jax.evaluate.compare RUN...`). Fig. 4 movements: the start and the target are two of the centres of
+the four corner cells of the sensor, all 12 ordered pairs (`paper_figures`).
 """
 
 from reach_jax.evaluate.figure_files import FIGURE_DIGESTS

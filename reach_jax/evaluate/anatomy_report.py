@@ -67,12 +67,18 @@ def headline(anatomy: dict, frame: str | None, recipe: int) -> str:
       frame: the frame (a key of `by_frame`).
       recipe: the recipe's index.
     """
+    body = plain_headline(anatomy, frame, recipe)
+    return f"**Failure anatomy** ([anatomy.md](anatomy.md)), {body}" if body else "Failure anatomy: no cell."
+
+
+def plain_headline(anatomy: dict, frame: str | None, recipe: int) -> str:
+    """`headline`'s words without its Markdown, as a terminal shows them; "" where the recipe has no cell."""
     c, said = _headline_cell(by_frame(anatomy)[frame][recipe]["cells"]), words(anatomy)
     if c is None:
-        return "Failure anatomy: no cell."
+        return ""
     name = f"{frames.shown(c['learning'], frame)} → {frames.shown(c['test'], frame)}"
     fails, outs = (sum(c["counts"][k] for k in group) / c["movements"] for group in (FAIL_CLASSES, OUT_LIMITS))
-    text = f"**Failure anatomy** ([anatomy.md](anatomy.md)), {name}: {fails:.1%} of movements fail"
+    text = f"{name}: {fails:.1%} of movements fail"
     if fails:
         text += f" ({_composition(c['of_fails'], FAIL_CLASSES, said)}; {c['fails_in_goal']:.0%} in the goal square)"
     text += f", {outs:.1%} go out"
@@ -81,9 +87,10 @@ def headline(anatomy: dict, frame: str | None, recipe: int) -> str:
     return text + "."
 
 
-def headlines(anatomy: dict) -> dict:
-    """{frame: the claims report's line (`headline`) for each recipe} of an anatomy.json record."""
-    return {f: [headline(anatomy, f, k) for k in range(len(rs))] for f, rs in by_frame(anatomy).items()}
+def headlines(anatomy: dict, plain: bool = False) -> dict:
+    """{frame: the claims report's line (`headline`, or `plain_headline`) for each recipe} of an anatomy.json record."""
+    line = plain_headline if plain else headline
+    return {f: [line(anatomy, f, k) for k in range(len(rs))] for f, rs in by_frame(anatomy).items()}
 
 
 def _row(c: dict, frame: str | None, names: tuple[str, ...], few: int, of: str | None) -> str:

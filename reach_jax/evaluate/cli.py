@@ -1,18 +1,21 @@
 """The command line `python -m reach_jax.evaluate`: a run directory in, its eval/ files out (`evaluate.evaluate_run`).
 
-Every user error prints one line, "prog: error: message", and exits 2 with nothing written.
+Every user error prints one line, "prog: error: message", and exits 2 with nothing written. An evaluation ends with
+one screen (`report.summary_text`): the claims' verdicts, D, the paper's plausibility and the failures' headline,
+the files to open.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
 from reach_jax import evaluate
 from reach_jax.engine import distribute
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line, printable
-from reach_jax.evaluate import animation
+from reach_jax.evaluate import anatomy_report, animation, report
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.store import run_lock
 from reach_jax.store.checkpoint import CheckpointError
@@ -49,8 +52,12 @@ def main(argv=None) -> int:
         if args.claims_only:
             if args.checkpoint or args.out:
                 raise UsageError("--claims-only reads and rewrites RUN_DIR/eval: no --checkpoint or --out")
-            evaluate.redecide(args.run_dir)
-            print(f"claims decided again in {Path(args.run_dir) / evaluate.EVAL_DIR}", file=sys.stderr)
+            claims = evaluate.redecide(args.run_dir)
+            out = Path(args.run_dir) / evaluate.EVAL_DIR
+            anat = out / "anatomy.json"
+            failures = anatomy_report.headlines(json.loads(anat.read_text()), plain=True) if anat.is_file() else None
+            print(report.summary_text({"claims": claims}, args.run_dir, out, failures), file=sys.stderr)
+            print(f"claims decided again in {out}", file=sys.stderr)
             return 0
         distribute.setup_backend(1)  # the evaluation does not shard: one device, as the evaluate CLI always had
         if args.animate is not None:
@@ -75,5 +82,7 @@ def main(argv=None) -> int:
     except OSError as exc:
         sys.stderr.write(error_line(parser.prog, f"{out}: write failed ({exc})"))
         return EXIT_IO
+    failures = anatomy_report.headlines(results.json["anatomy"], plain=True)
+    print(report.summary_text(results.json, args.run_dir, out, failures), file=sys.stderr)
     print(f"evaluation written to {out}", file=sys.stderr)
     return 0

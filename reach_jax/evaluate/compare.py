@@ -4,12 +4,13 @@
 
 A row holds the frame it judges (the condition that stands for the paper's field, `frames`; "–" for an evaluation
 made before frames, which judged "viscous"), the recipe in words (`config.hyper.describe`), its networks per
-condition, the verdict of each claim,
-the Table-2 cells near the paper's, the learners that stayed at the whole field late in training, the networks that
-collapsed (`collapse`), the unexpected field's cell (no-field networks tested in the viscous field) and the learned
-hand damping along the field's unstable axis without the field, per learning condition. Nothing is recomputed: the
-rows are the run's own evaluation, so runs evaluated by any version of the code compare as they were decided; the
-collapsed networks of an evaluation made before they were named come from its `eval/table2.json`.
+condition, the verdict of each claim, the Table-2 cells near the paper's, D and the paper's plausibility
+(`plausibility`), the learners that stayed at the whole field late in training, the networks that collapsed
+(`collapse`), the unexpected field's cell (no-field networks tested in the viscous field) and the learned hand
+damping along the field's unstable axis without the field, per learning condition. Nothing is recomputed: the rows
+are the run's own evaluation, so runs evaluated by any version of the code compare as they were decided; the
+collapsed networks of an evaluation made before they were named come from its `eval/table2.json`, and D and the
+plausibility of one made before them from its cells' per-network values.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from pathlib import Path
 
 from reach_jax.config import Config, hyper
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line
-from reach_jax.evaluate import collapse, report
+from reach_jax.evaluate import collapse, plausibility, report
 from reach_jax.store import run_dir as run_dir_io
 
 CLAIMS = "eval/claims.json"  # each run's decided claims, written by `python -m reach_jax.evaluate`
@@ -34,7 +35,9 @@ def recipe_rows(run_dir: Path) -> list[dict]:
 
     A record holds the run, the `frame` (None before frames), the recipe's index and words, `networks`, `chunk`,
     `verdicts` (claim number ->
-    verdict), `cells_near` of the `cells` the paper has, `stable` of `judged` learners (None: none judged yet),
+    verdict), `cells_near` of the `cells` the paper has, `D` [points], `plausible_cells` (None with too few
+    networks) and `plausible` (the paper's table as a whole; None likewise), `stable` of `judged` learners (None:
+    none judged yet),
     `collapsed` (the collapsed networks' names, `collapse.names`; "" for none, None where unknown),
     `none_viscous` (mean success and out per network, fractions) and `damping` (learning condition -> mean damping
     along the field's unstable axis [N s/m]).
@@ -57,6 +60,13 @@ def _frame_rows(run_dir: Path, frame: str | None, data: dict) -> list[dict]:
         judged = [p for p in recipe["curriculum"]["learners"] if p["tail_chunks"]]
         judged_cells, near = report.paper_cells(recipe["cells"])
         field = next((c for c in recipe["cells"] if (c["learning"], c["test"]) == ("none", "viscous")), None)
+        if "D" not in recipe:  # evaluated before D and the plausibility were written: from the cells' values
+            recipe = {
+                **recipe,
+                "D": plausibility.distance(recipe["cells"]),
+                "plausibility": plausibility.judge(recipe["cells"], recipe["level"]),
+            }
+        record = recipe["plausibility"]
         rows.append(
             {
                 "run": str(run_dir),
@@ -68,6 +78,9 @@ def _frame_rows(run_dir: Path, frame: str | None, data: dict) -> list[dict]:
                 "verdicts": {c["claim"]: c["verdict"] for c in recipe["claims"]},
                 "cells_near": len(near),
                 "cells": len(judged_cells),
+                "D": recipe["D"],
+                "plausible_cells": None if record is None else record["plausible_cells"],
+                "plausible": None if record is None else record["plausible"],
                 "stable": sum(p["stable"] for p in judged) if judged else None,
                 "judged": len(judged),
                 "collapsed": None if collapsed is None else collapse.names([n for n in collapsed if n["recipe"] == k]),
@@ -98,16 +111,18 @@ def markdown(rows: list[dict]) -> str:
     """The records of `recipe_rows` as one Markdown table, with a line that says how to read it."""
     lines = [
         "Frame: the condition that stands for the paper's field (– before frames: viscous). "
-        "Claims: holds / part (holds in part) / no. Near: Table-2 cells within the target. Stable: of the learners "
-        "in their last 20% of trials, those that stayed at the whole field. Collapsed: networks below 50% success in "
-        "their own condition's test (the null field's for random forces). none → viscous: mean success / out per "
-        "network in the frame's field (paper 55% / 45%). Damping: mean learned hand damping along the frame's unstable "
-        "axis, no field, N s/m, per learning condition (none / the frame's field / random / random_nopast; the field's "
-        "eigenvalue there is +15.9).",
+        "Claims: holds / part (holds in part) / no. Near: Table-2 cells within the target. D: mean distance to the "
+        "paper's cells, points. Plausible: cells where the paper lies in the range of our networks' pairs, and "
+        "whether its D is plausible for two networks of ours (docs/claims.md; – below 3 networks). Stable: of the "
+        "learners in their last 20% of trials, those that stayed at the whole field. Collapsed: networks below 50% "
+        "success in their own condition's test (the null field's for random forces). none → viscous: mean success / "
+        "out per network in the frame's field (paper 55% / 45%). Damping: mean learned hand damping along the frame's "
+        "unstable axis, no field, N s/m, per learning condition (none / the frame's field / random / random_nopast; "
+        "the field's eigenvalue there is +15.9).",
         "",
-        "| run | frame | recipe | exploration | seeds | chunk | 1 | 2 | 3 | 4 | 5 | near | stable | collapsed "
-        "| none → viscous | damping |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| run | frame | recipe | exploration | seeds | chunk | 1 | 2 | 3 | 4 | 5 | near | D | plausible | stable "
+        "| collapsed | none → viscous | damping |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         verdicts = " | ".join(SHORT[r["verdicts"][k]] if k in r["verdicts"] else "–" for k in range(1, 6))
@@ -116,9 +131,14 @@ def markdown(rows: list[dict]) -> str:
         field = "–" if field is None else f"{100 * field['success']:.0f}% / {100 * field['out']:.0f}%"
         collapsed = "–" if r["collapsed"] is None else r["collapsed"] or "none"
         damping = " / ".join(f"{r['damping'][c]:.0f}" for c in CONDITIONS if c in r["damping"])
+        d = "–" if r["D"] is None else f"{r['D']:.1f}"
+        plausible = "–"
+        if r["plausible"] is not None:
+            plausible = f"{r['plausible_cells']}/{r['cells']}, table {'yes' if r['plausible'] else 'no'}"
         lines.append(
             f"| `{r['run']}` | {r['frame'] or '–'} | {r['recipe']} | {r['words']} | {r['networks']} | {r['chunk']} | "
-            f"{verdicts} | {r['cells_near']}/{r['cells']} | {stable} | {collapsed} | {field} | {damping} |"
+            f"{verdicts} | {r['cells_near']}/{r['cells']} | {d} | {plausible} | {stable} | {collapsed} | {field} | "
+            f"{damping} |"
         )
     return "\n".join(lines) + "\n"
 

@@ -29,7 +29,7 @@ from reach_jax.config import Config, hyper
 from reach_jax.config.paper import PAPER_NETWORKS, PAPER_TABLE2
 from reach_jax.env import task
 from reach_jax.env.environment import OUTCOME_NAMES, SUCCESS
-from reach_jax.evaluate import frames
+from reach_jax.evaluate import frames, plausibility
 from reach_jax.evaluate.report import collapsed_words, interval_text
 from reach_jax.physics import fields, sensor
 
@@ -152,20 +152,25 @@ def _recipe_name(hypers: dict) -> str:
     return ", ".join(f"{k} {v:g}" for k, v in hypers.items())
 
 
-def _table2_row(cell: dict, first: dict | None, few: int, frame: str | None) -> str:
-    """One Table-2 cell as a Markdown row: our intervals, our networks 0-1 summed (`first`), the paper's, near it;
-    the cell's conditions named as in the run (`frames.shown`)."""
+def _table2_row(cell: dict, first: dict | None, few: int, frame: str | None, pairs: dict | None) -> str:
+    """One Table-2 cell as a Markdown row: our intervals, our networks 0-1 summed (`first`), the paper's, near it,
+    and the range of our pairs with whether the paper lies in it (`pairs`, the cell's `plausibility` record); the
+    cell's conditions named as in the run (`frames.shown`)."""
     ours01 = _cell(first["success"], first["out"], first["fail"], first["mean_time_s"]) if first else "–"
     key = (cell["learning"], cell["test"])
     paper = _cell(*PAPER_TABLE2[key]) if key in PAPER_TABLE2 else "–"
     near = "–"
     if cell["near_paper"]:
         near = " / ".join("yes" if cell["near_paper"][n] else "no" for n in ("success", "out", "mean_time_s"))
+    spread, inside = "–", "–"
+    if pairs is not None:
+        spread = " / ".join(f"{100 * pairs[k]['low']:.1f}–{100 * pairs[k]['high']:.1f}" for k in plausibility.RATES)
+        inside = " / ".join("yes" if pairs[k]["inside"] else "no" for k in plausibility.RATES)
     return (
         f"| {frames.shown(cell['learning'], frame)} → {frames.shown(cell['test'], frame)} | "
         f"{interval_text(cell['success'], few, 100.0)} | "
         f"{interval_text(cell['out'], few, 100.0)} | {interval_text(cell['mean_time_s'], few, 1.0, 2)} | "
-        f"{ours01} | {paper} | {near} |"
+        f"{ours01} | {paper} | {near} | {spread} | {inside} |"
     )
 
 
@@ -200,7 +205,10 @@ def frames_markdown(judged: dict, source: str) -> str:
         " time. Beside it, success-out-fail (mean time) summed over our networks of seeds 0 and 1, and the paper's"
         f" sum over its {PAPER_NETWORKS}"
         ' networks. "near paper": success and out within the target\'s percentage points, time within its'
-        " fraction (S / O / T).",
+        f' fraction (S / O / T). "our pairs": the range of success / out % over every pair of our networks of the'
+        f" condition summed as the paper's {PAPER_NETWORKS} are (its 2.5–97.5 percentiles, or lowest to highest"
+        ' where there are fewer than 40 pairs); "paper in it": whether the paper\'s success / out lie in that range'
+        " (docs/claims.md).",
     ]
     few = recipes[0].get("informative_networks", 0) if recipes else 0
     if recipes and recipes[0]["networks_per_condition"] < few:
@@ -218,12 +226,24 @@ def frames_markdown(judged: dict, source: str) -> str:
                 f"## {frames.heading(frame)}Recipe {k}: {_recipe_name(recipe['hypers'])} "
                 f"({recipe['networks_per_condition']} networks per condition)",
                 "",
-                "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper |",
-                "|---|---|---|---|---|---|---|",
+                "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper "
+                "| our pairs S / O % | paper in it |",
+                "|---|---|---|---|---|---|---|---|---|",
             ]
+            record = recipe.get("plausibility")
+            pairs = {(r["learning"], r["test"]): r for r in record["cells"]} if record else {}
             lines += [
-                _table2_row(cell, sums.get((cell["learning"], cell["test"], k)), few, frame) for cell in recipe["cells"]
+                _table2_row(
+                    cell,
+                    sums.get((cell["learning"], cell["test"], k)),
+                    few,
+                    frame,
+                    pairs.get((cell["learning"], cell["test"])),
+                )
+                for cell in recipe["cells"]
             ]
+            if "D" in recipe:
+                lines += ["", "Plausibility: " + plausibility.words(record, recipe["D"])]
             if "collapsed" in recipe:
                 lines += ["", collapsed_words(recipe)]
     return "\n".join(lines) + "\n"

@@ -1,11 +1,15 @@
 """The claims as Markdown: per recipe, the five claims with their numbers in words, the Table-2 cells, the checks.
 
-Units as in `claims`: success and out in percentage points, times [s], damping [N s/m].
+Units as in `claims`: success and out in percentage points, times [s], damping [N s/m]. `summary_text` is the
+screen that the evaluate command ends with.
 """
 
 from __future__ import annotations
 
-from reach_jax.evaluate import collapse, frames
+import shlex
+from pathlib import Path
+
+from reach_jax.evaluate import collapse, frames, plausibility
 
 
 def paper_cells(cells: list[dict]) -> tuple[list[dict], list[dict]]:
@@ -135,13 +139,15 @@ def _claim_row(c: dict, few: int) -> str:
 
 
 def _checks(recipe: dict) -> list[str]:
-    """The Table-2 target, the curriculum's stability and, where the evaluation named them, the collapsed networks."""
+    """The Table-2 target, the paper's plausibility (`plausibility.words`), the curriculum's stability and, where the
+    evaluation named them, the collapsed networks."""
     judged, near = paper_cells(recipe["cells"])
     cur = recipe["curriculum"]
     unstable = [p["learner"] for p in cur["learners"] if p["tail_chunks"] and not p["stable"]]
     lines = [
         "Table-2 target (success and out within the target's points, time within its fraction, every cell): "
         f"{len(near)} of {len(judged)} cells.",
+        *(["", "Plausibility: " + plausibility.words(recipe["plausibility"], recipe["D"])] if "D" in recipe else []),
         "",
         "Curriculum: " + _curriculum_words(cur, unstable),
     ]
@@ -199,4 +205,81 @@ def _few_words(recipe: dict) -> str:
     return (
         f"With {recipe['networks_per_condition']} networks a condition (fewer than {few}) an interval says little,"
         " so each network's value stands beside the mean instead."
+    )
+
+
+SHORT = {"holds": "holds", "holds in part": "part", "does not hold": "no"}  # a verdict in a few letters
+SUMMARY_SECTIONS = 4  # frame x recipe sections on the closing screen; claims.md and compare have the rest
+# The files worth opening first, in order, with what each shows; those the evaluation wrote are listed.
+SUMMARY_FILES = {
+    "table2.md": "Table 2 beside the paper's, with our pairs' ranges",
+    "claims.md": "the five claims with their numbers and verdicts",
+    "anatomy.md": "how the failing movements fail",
+    "fig4.png": "Fig. 4: corner movements without and with the field",
+    "learning_curves.png": "learning curves",
+    "adaptation.md": "adaptation over the protocols' trials",
+}
+
+
+def summary_text(results: dict, run_dir: Path, out: Path, failures: dict | None = None) -> str:
+    """The closing screen of `python -m reach_jax.evaluate`: per frame and recipe the claims' verdicts, the cells
+    near the paper, D and the paper's plausibility and the failures' headline; the files to open; what to run next.
+
+    Args:
+      results: the evaluation's results keyed by file (`run.Results.json`); "claims" is read.
+      run_dir: the evaluated run.
+      out: the folder the files were written to; the `SUMMARY_FILES` found there are listed.
+      failures: {frame: one line per recipe} of the failure anatomy (`anatomy_report.headlines(..., plain=True)`);
+        none where absent.
+    """
+    claims = results["claims"]
+    judged = {claims.get("frame"): claims, **claims.get("frames", {})}
+    sections = [(frame, k, recipe) for frame, decided in judged.items() for k, recipe in enumerate(decided["recipes"])]
+    lines = [f"{run_dir} at chunk {claims['chunk']}:"]
+    for frame, k, recipe in sections[:SUMMARY_SECTIONS]:
+        verdicts = " · ".join(f"{c['claim']} {SHORT[c['verdict']]}" for c in recipe["claims"]) or "none decided"
+        cells, near = paper_cells(recipe["cells"])
+        collapsed = f"; {len(recipe['collapsed'])} networks collapsed" if recipe.get("collapsed") else ""
+        lines += [
+            f"{frames.heading(frame)}recipe {k} ({recipe['networks_per_condition']} networks a condition): "
+            f"claims {verdicts}{collapsed}",
+            f"  Table 2: {len(near)} of {len(cells)} cells near the paper" + _plausible_cells(recipe),
+            "  " + _plausible_table(recipe),
+            *([f"  Failures, {line}"] if (line := _at((failures or {}).get(frame, []), k)) else []),
+        ]
+    if len(sections) > SUMMARY_SECTIONS:
+        lines.append(f"… and {len(sections) - SUMMARY_SECTIONS} more frame and recipe sections in claims.md")
+    shown = [name for name in SUMMARY_FILES if (Path(out) / name).is_file()]
+    width = max(map(len, shown), default=0)
+    lines += ["Open:", *(f"  {Path(out) / name}{' ' * (width - len(name))}  {SUMMARY_FILES[name]}" for name in shown)]
+    lines.append(
+        f"Next: python -m reach_jax.evaluate.compare {shlex.quote(str(run_dir))} [OTHER_RUN ...] sets runs side by"
+        " side; docs/claims.md says how each verdict is decided."
+    )
+    return "\n".join(lines)
+
+
+def _at(lines: list[str], k: int) -> str:
+    return lines[k] if k < len(lines) else ""
+
+
+def _plausible_cells(recipe: dict) -> str:
+    """The cells in which the paper is a plausible two-network draw from ours, for the closing screen."""
+    record = recipe.get("plausibility")
+    if record is None:
+        return ""
+    return f"; the paper plausible in {record['plausible_cells']} of {len(record['cells'])}"
+
+
+def _plausible_table(recipe: dict) -> str:
+    """D and whether the paper's table as a whole is plausible (`plausibility.judge`), for the closing screen."""
+    record = recipe.get("plausibility")
+    if record is None:
+        d = recipe.get("D")
+        return f"D {'–' if d is None else f'{d:.1f}'} points (plausibility needs {plausibility.MIN_NETWORKS} networks)"
+    pd = record["pairs_D"]
+    verdict = "is" if record["plausible"] else "is not"
+    return (
+        f"D {record['D']:.1f} points, our pairs' {pd['low']:.1f}–{pd['high']:.1f} ({record['level']:.0%}): the"
+        f" paper's table {verdict} a plausible draw of two networks from ours"
     )

@@ -7,7 +7,7 @@ full evaluation and `redecide` (from the committed eval/ files) decide through `
 from __future__ import annotations
 
 from reach_jax.config import Config
-from reach_jax.evaluate import claims, collapse, pulls, stats
+from reach_jax.evaluate import claims, collapse, plausibility, pulls, stats
 from reach_jax.train.health import is_setback, tail_rows
 
 
@@ -58,6 +58,7 @@ def decide(
         cells = claims.Cells(rows, table["pairs_per_network"])
         after_k = pulls.pool_aftereffect([a for a in per_seed if a["recipe"] == k], level)
         collapsed = collapse.of_table(table, cfg, recipe=k)
+        table_cells = claims.table_cells(cells, cfg.claims)
         verdicts.append(
             {
                 "hypers": hypers,
@@ -68,7 +69,9 @@ def decide(
                 "collapsed": collapsed,
                 "collapse_success": cfg.claims.collapse_success,
                 "aftereffect": after_k,
-                "cells": claims.table_cells(cells, cfg.claims),
+                "cells": table_cells,
+                "D": plausibility.distance(table_cells),
+                "plausibility": plausibility.judge(table_cells, level),
                 "impedance": impedance_cells(imp, nets, level),
                 "curriculum": curriculum_stability(metrics, nets, cfg.train.trials, cfg),
             }

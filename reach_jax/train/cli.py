@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 import zlib
 from pathlib import Path
@@ -175,4 +176,5 @@ def _validate_and_train(args: argparse.Namespace, prog: str) -> int:
         for line in trouble:
             print(f"{prog}: {line}", file=sys.stderr)
         print(f"run written to {inv.prepared.run_dir}", file=sys.stderr)
+        print(f"evaluate it: python -m reach_jax.evaluate {shlex.quote(str(inv.prepared.run_dir))}", file=sys.stderr)
     return 0

@@ -4,7 +4,8 @@
     python studies/search/objective.py runs/heldout          # D of the default's held-out run: 24.4
 
 D is the mean over the paper's 8 Table-2 cells of |success − paper| + |out − paper| in percentage points, a
-recipe's success and out in a cell being the means over its networks of each network's rate (`eval/claims.json`).
+recipe's success and out in a cell being the means over its networks of each network's rate (`eval/claims.json`;
+`reach_jax.evaluate.plausibility.distance`).
 Ranked by D; recipes within TIE_POINTS of each other by stable share, then by fewer knobs off their defaults.
 Beside D: the claims' verdicts, the cells near the paper, the stable share, the no-field damping along the field's
 unstable axis and the time ratio of none → viscous to none → none. With --out, writes OUT.md and OUT.json.
@@ -17,6 +18,7 @@ import json
 from pathlib import Path
 
 from reach_jax.config import hyper
+from reach_jax.evaluate.plausibility import distance
 from reach_jax.store import run_dir
 
 ROUND_DEFAULTS = hyper.defaults(8)  # the default recipe while the rounds ran: config version 8, before round 4's pick
@@ -24,13 +26,6 @@ ROUND_DEFAULTS = hyper.defaults(8)  # the default recipe while the rounds ran: c
 SCRIPT = "studies/search/objective.py"
 TIE_POINTS = 0.5  # recipes whose D differ by less than this are tied (PLAN.md)
 VERDICT_WORDS = {"holds": "yes", "holds in part": "part", "does not hold": "no"}
-
-
-def distance(cells: list[dict]) -> float:
-    """D [points] over the cells the paper has (each with its `paper` values), from a recipe's claims.json cells."""
-    judged = [c for c in cells if c["paper"] is not None]
-    terms = [abs(c[k]["mean"] - c["paper"][k]) * 100 for c in judged for k in ("success", "out")]
-    return sum(terms) / len(judged)
 
 
 def short_learners(run: Path) -> list[int]:
