@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from reach_jax.config import Config, TrainConfig, hyper
-from reach_jax.evaluate import collapse, compare, run
+from reach_jax.evaluate import collapse, compare, judgements
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import health
 from reach_jax.train.sinks import ProgressSink
@@ -97,7 +97,7 @@ def test_a_network_collapsed_in_its_home_test_is_named_in_table2_claims_and_comp
         if (r["learning"], r["seed"], r["test"]) == ("random", 1, "viscous"):
             r.update(success=100, out=900, fail=40)  # not its home test (random -> none): not a collapse
     path.write_text(json.dumps(table))
-    result = run.redecide(tmp_path)
+    result = judgements.redecide(tmp_path)
     recipe = result["recipes"][0]
     want = [{"learner": 8, "learning": "viscous", "seed": 0, "recipe": 0, "test": "viscous", "success": 100 / 1040}]
     assert recipe["collapsed"] == want

@@ -4,18 +4,24 @@ the config's own sensor, and a field the arm cannot serve refused in one line.""
 from __future__ import annotations
 
 import dataclasses
+import json
+import subprocess
+import sys
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from reach_jax import evaluate
 from reach_jax.config import from_partial, hyper, workspace
 from reach_jax.engine import batch, random_stream
 from reach_jax.engine.chunk import make_trace
 from reach_jax.engine.learner_state import init_learner
 from reach_jax.env import protocol, task
+from reach_jax.evaluate import geometry
 from reach_jax.physics import arm, sensor
+from reach_jax.store import run_dir as run_dir_io
 from reach_jax.testing import reference
 from reach_jax.train import cli as train_cli
 
@@ -130,3 +136,37 @@ def test_a_geometry_the_arm_cannot_serve_is_a_one_line_error_with_nothing_writte
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and "visual field centred at" in err[0], err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_run_of_two_visual_fields_evaluates_each_in_its_own(tmp_path):
+    spec = {
+        "train": {"trials": 20, "seeds": 1, "conditions": ["none", "viscous_mirror"], "chunk_steps": 300},
+        "eval": {"lattice": 4},  # 12 pairs a network instead of 1,040: enough to see where they lie
+    }
+    (tmp_path / "two.json").write_text(json.dumps(spec))
+    run = tmp_path / "run"
+    train = ["train", "--config", str(tmp_path / "two.json"), "--sweep", "sensor_dx=0,0.1", "--out", str(run)]
+    for argv in ([*train, "--quiet"], ["evaluate", str(run)]):
+        done = subprocess.run(
+            [sys.executable, "-m", f"reach_jax.{argv[0]}", *argv[1:]], capture_output=True, text=True, timeout=600
+        )
+        assert done.returncode == 0, done.stderr[-3000:]
+    assert "geometries.md lists them" in done.stderr
+    out = run / evaluate.EVAL_DIR
+    index = json.loads((out / "geometries.json").read_text())
+    cfg = run_dir_io.read_config(run)
+    for k, dx in enumerate((0.0, 0.1)):
+        field = index["fields"][k]
+        moved = workspace.moved_sensor(cfg.sensor, dx, 0.0, 1.0)
+        assert field["centre_m"] == pytest.approx(list(moved.centre)) and field["learners"] == [k, k + 2]
+        sub = out / geometry.subdir(k)
+        rows = json.loads((sub / "table2.json").read_text())["per_network"]
+        assert sorted({r["learner"] for r in rows}) == [0, 1]  # its two networks, numbered anew
+        # The Fig. 4 movements start from the corner cells of this field, not of the config's sensor.
+        (x0, y0), (x1, y1) = sensor.field_bounds(moved)
+        moves = json.loads((sub / "aftereffect.json").read_text())["movements"]
+        starts = np.array([m["start_m"] for m in moves])
+        assert np.all((starts[:, 0] > x0) & (starts[:, 0] < x1) & (starts[:, 1] > y0) & (starts[:, 1] < y1))
+        assert (sub / "claims.md").is_file() and (sub / "anatomy.png").is_file()
+    assert "geometry_1/claims.md" in (out / "geometries.md").read_text()

@@ -27,6 +27,7 @@ the four corner cells of the sensor, all 12 ordered pairs (`paper_figures`).
 """
 
 from reach_jax.evaluate.figure_files import FIGURE_DIGESTS
+from reach_jax.evaluate.judgements import redecide
 from reach_jax.evaluate.lattice import (
     count,
     lattice_points,
@@ -55,8 +56,8 @@ from reach_jax.evaluate.run import (
     FigureData,
     Results,
     evaluate,
+    evaluate_fields,
     evaluate_run,
-    redecide,
     write_results,
 )
 from reach_jax.evaluate.verdicts import decide, impedance_cells
@@ -73,6 +74,7 @@ __all__ = [
     "count_peaks",
     "decide",
     "evaluate",
+    "evaluate_fields",
     "evaluate_run",
     "impedance_cells",
     "lattice_points",

@@ -1,7 +1,7 @@
 """The failure anatomy in words and in a figure: anatomy.md, anatomy.png and the claims report's line; shares in %.
 
-Reads `anatomy.summarize`'s record (anatomy.json), so that `run.redecide` can write the claims report's line again
-from the committed file.
+Reads `anatomy.summarize`'s record (anatomy.json), so that `judgements.redecide` can write the claims report's line
+again from the committed file.
 """
 
 from __future__ import annotations

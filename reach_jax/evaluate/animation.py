@@ -12,6 +12,7 @@ Units: positions [m] in the shoulder frame, time [s].
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from matplotlib.patches import Rectangle
 from reach_jax.config import Config
 from reach_jax.env import task
 from reach_jax.env.environment import OUTCOME_NAMES, SUCCESS
-from reach_jax.evaluate import episodes, figures, paper_figures
+from reach_jax.evaluate import episodes, figures, geometry, paper_figures
 from reach_jax.evaluate.frames import PAPER_FIELD, frame_list
 from reach_jax.evaluate.paper_figures import CORNER_NAMES, corner_centres
 from reach_jax.store import run_dir as run_dir_io
@@ -184,6 +185,10 @@ def animate(
       dpi: resolution of the frames.
     """
     run = run_dir_io.load(run_dir)
+    (sensor, _), *more = geometry.groups(run)
+    if more:
+        raise ValueError(f"the run's learners see {len(more) + 1} visual fields; animate one field's run")
+    run = run._replace(cfg=dataclasses.replace(run.cfg, sensor=sensor))
     cfg = run.cfg
     tests = ("none", frame_list(cfg)[0] or PAPER_FIELD) if tests is None else tests
     network = pick_network(run, learned, tests[0]) if network is None else network

@@ -15,7 +15,7 @@ from pathlib import Path
 from reach_jax import evaluate
 from reach_jax.engine import distribute
 from reach_jax.errors import EXIT_IO, EXIT_USAGE, Parser, UsageError, error_line, printable
-from reach_jax.evaluate import anatomy_report, animation, report
+from reach_jax.evaluate import anatomy_report, animation, geometry, report
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.store import run_lock
 from reach_jax.store.checkpoint import CheckpointError
@@ -75,13 +75,27 @@ def main(argv=None) -> int:
     if live is not None:
         note = f"{args.run_dir} is still training ({live}); evaluating its checkpoint after chunk {run.chunk}"
         sys.stderr.write(f"{parser.prog}: {printable(note)}\n")
-    results = evaluate.evaluate_run(run)
+    return _evaluate_and_write(args, run, parser.prog)
+
+
+def _evaluate_and_write(args, run, prog: str) -> int:
+    """Evaluate a loaded run, write its files and print the closing screen; returns the exit status."""
     out = args.out or Path(args.run_dir) / evaluate.EVAL_DIR
+    several = len(geometry.groups(run)) > 1
     try:
-        evaluate.write_results(args.run_dir, run, results, out)
+        if several:
+            evaluate.evaluate_fields(args.run_dir, run, out)
+        else:
+            results = evaluate.evaluate_run(run)
+            evaluate.write_results(args.run_dir, run, results, out)
     except OSError as exc:
-        sys.stderr.write(error_line(parser.prog, f"{out}: write failed ({exc})"))
+        sys.stderr.write(error_line(prog, f"{out}: write failed ({exc})"))
         return EXIT_IO
+    if several:
+        index = out / f"{geometry.INDEX}.md"
+        print(f"{args.run_dir}: each visual field evaluated as a run of its own; {index} lists them", file=sys.stderr)
+        print(f"evaluation written to {out}", file=sys.stderr)
+        return 0
     failures = anatomy_report.headlines(results.json["anatomy"], plain=True)
     print(report.summary_text(results.json, args.run_dir, out, failures), file=sys.stderr)
     print(f"evaluation written to {out}", file=sys.stderr)

@@ -221,29 +221,28 @@ def frames_markdown(judged: dict, source: str) -> str:
     for frame, (table, recipes) in judged.items():
         sums = {(r["learning"], r["test"], r["recipe"]): r for r in table["first_two"]}
         for k, recipe in enumerate(recipes):
-            lines += [
-                "",
-                f"## {frames.heading(frame)}Recipe {k}: {_recipe_name(recipe['hypers'])} "
-                f"({recipe['networks_per_condition']} networks per condition)",
-                "",
-                "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper "
-                "| our pairs S / O % | paper in it |",
-                "|---|---|---|---|---|---|---|---|---|",
-            ]
-            record = recipe.get("plausibility")
-            pairs = {(r["learning"], r["test"]): r for r in record["cells"]} if record else {}
-            lines += [
-                _table2_row(
-                    cell,
-                    sums.get((cell["learning"], cell["test"], k)),
-                    few,
-                    frame,
-                    pairs.get((cell["learning"], cell["test"])),
-                )
-                for cell in recipe["cells"]
-            ]
-            if "D" in recipe:
-                lines += ["", "Plausibility: " + plausibility.words(record, recipe["D"])]
-            if "collapsed" in recipe:
-                lines += ["", collapsed_words(recipe)]
+            lines += _recipe_section(frame, k, recipe, sums, few)
     return "\n".join(lines) + "\n"
+
+
+def _recipe_section(frame: str | None, k: int, recipe: dict, sums: dict, few: int) -> list[str]:
+    """The lines of one frame's Table 2 for recipe k: its heading, its rows, its plausibility and its collapses."""
+    lines = [
+        "",
+        f"## {frames.heading(frame)}Recipe {k}: {_recipe_name(recipe['hypers'])} "
+        f"({recipe['networks_per_condition']} networks per condition)",
+        "",
+        "| learning → test | success % | out % | mean time [s] | ours, seeds 0–1 | paper | near paper "
+        "| our pairs S / O % | paper in it |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    record = recipe.get("plausibility")
+    pairs = {(r["learning"], r["test"]): r for r in record["cells"]} if record else {}
+    for cell in recipe["cells"]:
+        key = (cell["learning"], cell["test"])
+        lines.append(_table2_row(cell, sums.get((*key, k)), few, frame, pairs.get(key)))
+    if "D" in recipe:
+        lines += ["", "Plausibility: " + plausibility.words(record, recipe["D"])]
+    if "collapsed" in recipe:
+        lines += ["", collapsed_words(recipe)]
+    return lines

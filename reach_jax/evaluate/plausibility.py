@@ -115,6 +115,34 @@ def judge(cells: list[dict], level: float) -> dict | None:
     networks = {c["learning"]: len(c["success"]["values"]) for c in judged}
     if not judged or min(networks.values()) < MIN_NETWORKS:
         return None
+    rows, ranges, terms = _cell_rows(judged, networks, level)
+    d_pairs, sampled = table_distances(list(terms.values()), len(judged))
+    d_paper = distance(judged)
+    above = float(np.mean(d_pairs < d_paper))
+    return {
+        "D": d_paper,
+        "level": level,
+        "cells": rows,
+        "plausible_cells": sum(r["plausible"] for r in rows),
+        "range": "all pairs" if "all pairs" in ranges else "percentiles",
+        "networks": networks,
+        "pairs_D": _spread(d_pairs, level, sampled),
+        "paper_D_above": above,
+        "plausible": above <= level,
+    }
+
+
+def _spread(d_pairs: np.ndarray, level: float, sampled: bool) -> dict:
+    """The median and `level` range of our pair tables' D [points], how many tables, and whether they were sampled."""
+    tail = (1.0 - level) / 2
+    low, median, high = np.percentile(d_pairs, [100 * tail, 50, 100 * (1 - tail)])
+    spread = {"median": float(median), "low": float(low), "high": float(high)}
+    return {**spread, "tables": int(len(d_pairs)), "sampled": sampled}
+
+
+def _cell_rows(judged: list[dict], networks: dict, level: float) -> tuple[list[dict], set, dict]:
+    """Per paper cell its pairs' range and the paper in it; the ranges' kinds; per learning condition the pairs' D
+    terms (every pair's |pair - rest| summed over the condition's cells and rates, in points)."""
     rows, ranges, terms = [], set(), {learning: 0.0 for learning in networks}
     for c in judged:
         row = {"learning": c["learning"], "test": c["test"]}
@@ -127,28 +155,7 @@ def judge(cells: list[dict], level: float) -> dict | None:
             terms[c["learning"]] = terms[c["learning"]] + np.abs(inside - rest) * 100
         row["plausible"] = all(row[k]["inside"] for k in RATES)
         rows.append(row)
-    d_pairs, sampled = table_distances(list(terms.values()), len(judged))
-    d_paper = distance(judged)
-    tail = (1.0 - level) / 2
-    low, median, high = np.percentile(d_pairs, [100 * tail, 50, 100 * (1 - tail)])
-    above = float(np.mean(d_pairs < d_paper))
-    return {
-        "D": d_paper,
-        "level": level,
-        "cells": rows,
-        "plausible_cells": sum(r["plausible"] for r in rows),
-        "range": "all pairs" if "all pairs" in ranges else "percentiles",
-        "networks": networks,
-        "pairs_D": {
-            "median": float(median),
-            "low": float(low),
-            "high": float(high),
-            "tables": int(len(d_pairs)),
-            "sampled": sampled,
-        },
-        "paper_D_above": above,
-        "plausible": above <= level,
-    }
+    return rows, ranges, terms
 
 
 def words(record: dict | None, d: float | None) -> str:

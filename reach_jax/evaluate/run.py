@@ -21,22 +21,20 @@ from reach_jax.evaluate import (
     anatomy_report,
     figures,
     frames,
+    geometry,
     impedance,
     lattice,
     movement,
     paper_figures,
     pulls,
-    report,
-    verdicts,
 )
 from reach_jax.evaluate.episodes import Episode, Trajectory, network_policy, run_episodes
 from reach_jax.evaluate.figure_files import Figures
+from reach_jax.evaluate.judgements import EVAL_DIR, by_frame, judge, write_judgements
 from reach_jax.evaluate.paper_figures import FIG4_PANELS, corner_pairs
 from reach_jax.store import files
 from reach_jax.store import run_dir as run_dir_io
-from reach_jax.store.checkpoint import CheckpointError
 
-EVAL_DIR = "eval"
 RESULT_FILES = ("table2", "aftereffect", "quality", "impedance", "anatomy", "claims")  # each written as NAME.json
 
 
@@ -142,32 +140,16 @@ def aftereffect_per_seed(corners: Episode, corner: tuple, v: frames.View, n_reci
     return per_seed
 
 
-def aftereffect_result(per_seed: list[dict], cfg: Config) -> dict:
-    """aftereffect.json: recipe 0's figure seed, with every (recipe, seed) beside it."""
-    main = [a for a in per_seed if a["recipe"] == 0 and a["seed"] == cfg.eval.figure_seed]
-    if main:
-        return {**main[0], "per_seed": per_seed}
-    return {"error": "needs the none and viscous learning conditions at seed cfg.eval.figure_seed"}
-
-
-def judge(v: frames.View, table: dict, per_seed: list[dict], imp: dict, recipes: list[dict], metrics) -> dict:
-    """One frame's judgement: {"aftereffect", "impedance", "claims"} as the files hold them, from the whole run's
-    `table`, its impedance summary `imp` along this frame's axes and the frame's `per_seed` after-effects; the
-    claims are decided on the frame's view of the table and of the impedance."""
-    seen = {**imp, "per_network": frames.rows_view(imp["per_network"], v.frame, v.cfg)}
-    table = frames.table_view(table, v.frame, v.cfg)
-    decided = verdicts.decide(table, per_seed, seen, recipes, v.recipe_of, metrics, v.cfg)
-    return {"aftereffect": aftereffect_result(per_seed, v.cfg), "impedance": imp, "claims": {"recipes": decided}}
-
-
-def by_frame(judged: dict, key: str) -> dict:
-    """A file's record of every frame (`judge`): the first frame's at the top, the others' under "frames"."""
-    first, *others = judged
-    return {"frame": first, **judged[first][key], "frames": {f: judged[f][key] for f in others}}
-
-
 def evaluate_run(data: run_dir_io.Run) -> Results:
-    """Run the test protocol on every network of a run: the JSON-ready results and the arrays for the figures."""
+    """Run the test protocol on every network of a run: the JSON-ready results and the arrays for the figures.
+
+    The networks are tested in the visual field they learned in; those of a run that trained several
+    (`geometry.groups`) are evaluated one field at a time (`evaluate_fields`): ValueError here.
+    """
+    (sensor, _), *more = geometry.groups(data)
+    if more:
+        raise ValueError(f"the run's learners see {len(more) + 1} visual fields; evaluate_fields evaluates each")
+    data = data._replace(cfg=dataclasses.replace(data.cfg, sensor=sensor))
     cfg = data.cfg
     starts, targets = lattice.test_pairs(cfg)
     corner = corner_pairs(cfg)
@@ -179,7 +161,7 @@ def evaluate_run(data: run_dir_io.Run) -> Results:
     for row in table["per_network"]:
         row.update(recipes[row["recipe"]])
     gains = impedance.measure(policy, params, masks, grid, grid_traj, starts, targets, cfg)
-    # Every network's sensor cell sets its goal square in the anatomy: today one for all, per network tomorrow.
+    # The networks evaluated together share one visual field (`geometry.groups`), so one cell sets every goal square.
     th = anatomy.thresholds(cfg, np.full(len(data.learners), cfg.sensor.cell_size))
     labelled = anatomy.label_movements(grid, grid_traj, targets, th)
     judged, panels = {}, {}
@@ -202,53 +184,6 @@ def evaluate_run(data: run_dir_io.Run) -> Results:
         "adaptation": adaptation.analyse(data.trials, data.learners, cfg),
     }
     return Results(json=results, figures=FigureData(panels, *corner, gains))
-
-
-def redecide(run_dir: Path) -> dict:
-    """Decide the claims again from a run's committed eval/ files, without running the test episodes again.
-
-    For a change in how claims are decided (the statistics, the criteria's presentation): the test episodes
-    round differently in float32 on another CPU, where a few of a network's 2080 movements can change outcome.
-    Rewrites eval/claims.json, claims.md and table2.md; returns the new claims results. claims.md carries the
-    failure anatomy's line where eval/anatomy.json exists (evaluations before it have none).
-    """
-    run_dir = Path(run_dir)
-    out = run_dir / EVAL_DIR
-    paths = [out / f"{n}.json" for n in ("table2", "aftereffect", "impedance")]
-    for path in paths:
-        if not path.is_file():
-            raise CheckpointError(f"{path}: missing; evaluate the run in full first")
-    table, after, imp = (json.loads(path.read_text()) for path in paths)
-    cfg = run_dir_io.read_config(run_dir)
-    afters, imps = ({r.get("frame"): r, **r.get("frames", {})} for r in (after, imp))
-    missing = [f for f in frames.frame_list(cfg) if f not in afters or f not in imps]
-    if missing:
-        raise CheckpointError(f"{paths[1]}: no frame {missing[0]} (written before frames); evaluate the run in full")
-    networks = {r["learner"]: r for r in table["per_network"]}
-    learners = [(networks[i]["learning"], networks[i]["seed"]) for i in sorted(networks)]
-    recipe_of = [networks[i]["recipe"] for i in sorted(networks)]
-    metrics = run_dir_io.read_metrics(run_dir, table["chunk"])
-    judged = {}
-    for frame in frames.frame_list(cfg):
-        v = frames.view(frame, learners, recipe_of, cfg)
-        per_seed = afters[frame].get("per_seed", [])
-        judged[frame] = judge(v, table, per_seed, imps[frame], imp["recipes"], metrics)
-    result = {"chunk": table["chunk"], "trials_per_network": cfg.train.trials, **by_frame(judged, "claims")}
-    anatomy_path = out / "anatomy.json"
-    anat = json.loads(anatomy_path.read_text()) if anatomy_path.is_file() else None
-    write_judgements(out, table, result, cfg, f"{run_dir} (chunk {table['chunk']})", anat)
-    return result
-
-
-def write_judgements(out: Path, table: dict, claims: dict, cfg: Config, source: str, anat: dict | None) -> None:
-    """Write claims.json, and table2.md and claims.md with a section for each frame (with the failure anatomy's
-    line per recipe from `anat`, anatomy.json's record, where there is one)."""
-    decided = {claims["frame"]: claims, **claims["frames"]}
-    files.atomic_write_bytes(out / "claims.json", json.dumps(claims, indent=2).encode())
-    seen = {f: (frames.table_view(table, f, cfg), decided[f]["recipes"]) for f in decided}
-    files.atomic_write_bytes(out / "table2.md", lattice.frames_markdown(seen, source).encode())
-    lines = anatomy_report.headlines(anat) if anat is not None else {}
-    files.atomic_write_bytes(out / "claims.md", report.claims_markdown(claims, source, lines).encode())
 
 
 def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Path | None = None) -> Path:
@@ -283,14 +218,37 @@ def write_results(run_dir: Path, data: run_dir_io.Run, results: Results, out: Pa
     return out
 
 
+def evaluate_fields(run_dir: Path, data: run_dir_io.Run, out: Path | None = None) -> list[Results]:
+    """Evaluate each visual field's learners of a run as a run of their own and write it into out/geometry_<k>/
+    (`geometry.subdir`), with eval/geometries.json and .md to index them; returns each field's results in order.
+
+    Args:
+      run_dir: the run directory (named in the files).
+      data: the run as `run_dir.load` gives it.
+      out: the folder (default RUN_DIR/eval).
+    """
+    out = Path(run_dir) / EVAL_DIR if out is None else Path(out)
+    parts, done = geometry.groups(data), []
+    for k, (sensor, picks) in enumerate(parts):
+        sub = geometry.sub_run(data, sensor, picks)
+        done.append(evaluate_run(sub))
+        write_results(run_dir, sub, done[-1], out / geometry.subdir(k))
+    record = geometry.index_record(parts, [r.json["claims"] for r in done])
+    geometry.write_index(out, record, f"{run_dir} (chunk {data.chunk})")
+    return done
+
+
 def evaluate(run_dir: Path, checkpoint_path: Path | None = None, out: Path | None = None) -> dict:
     """Evaluate a run at its newest (or the given) checkpoint and write every file into `out` (default RUN_DIR/eval).
 
     Returns the JSON-ready results, keyed by file: table2, aftereffect, quality, impedance, anatomy, claims, and
-    adaptation (None for a run without protocol learners and a per-trial log).
+    adaptation (None for a run without protocol learners and a per-trial log). A run of several visual fields is
+    evaluated one field at a time (`evaluate_fields`): then {"fields": each field's results}.
     Raises CheckpointError (one line, naming the bad file) before anything is written.
     """
     run = run_dir_io.load(run_dir, checkpoint_path)
+    if len(geometry.groups(run)) > 1:
+        return {"fields": [r.json for r in evaluate_fields(run_dir, run, out)]}
     results = evaluate_run(run)
     write_results(run_dir, run, results, out)
     return results.json
