@@ -139,7 +139,7 @@ def test_a_geometry_the_arm_cannot_serve_is_a_one_line_error_with_nothing_writte
 
 
 @pytest.mark.slow
-def test_a_run_of_two_visual_fields_evaluates_each_in_its_own(tmp_path):
+def test_a_run_of_two_visual_fields_evaluates_each_in_its_own(tmp_path, load_tool):
     spec = {
         "train": {"trials": 20, "seeds": 1, "conditions": ["none", "viscous_mirror"], "chunk_steps": 300},
         "eval": {"lattice": 4},  # 12 pairs a network instead of 1,040: enough to see where they lie
@@ -170,3 +170,10 @@ def test_a_run_of_two_visual_fields_evaluates_each_in_its_own(tmp_path):
         assert np.all((starts[:, 0] > x0) & (starts[:, 0] < x1) & (starts[:, 1] > y0) & (starts[:, 1] < y1))
         assert (sub / "claims.md").is_file() and (sub / "anatomy.png").is_file()
     assert "geometry_1/claims.md" in (out / "geometries.md").read_text()
+    # The study's map reads each field's files: one point each, at its centre, with its networks' damping and outs.
+    study = load_tool("studies/geometry/map")
+    study.main([str(run), "--out", str(tmp_path / "map")])
+    found = json.loads((tmp_path / "map.json").read_text())
+    assert [p["centre_m"] for p in found["points"]] == [f["centre_m"] for f in index["fields"]]
+    assert all(len(p["damping_per_network"]) == len(p["none_field_out_per_network"]) == 1 for p in found["points"])
+    assert found["networks"] == 2 and (tmp_path / "map.png").is_file()
