@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
-from reach_jax.evaluate import stats
+from reach_jax.evaluate import anatomy, stats
 
 # An interval's kind, by its key: rates on the logit scale, ratios as the geometric mean, times and gains on the log
 # scale, the rest (differences, angles) plain.
-RATES = ("success", "out")
+RATES = ("success", "out", *anatomy.LABELS)  # the anatomy's shares of a network's movements are rates too
 RATIOS = ("time_ratio",)
 POSITIVE = ("mean_time_s", "damping_", "stiffness_", "passive_")
 TOLERANCE = 1e-12  # of max(1, |value|): the old bisection stopped within 1e-12 of t, so a bound [N/m] of 8e6 moved 6e-7

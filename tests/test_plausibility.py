@@ -138,12 +138,15 @@ def test_fewer_than_three_networks_a_condition_leave_it_undecided():
     assert "needs 3 networks" in plausibility.words(None, 12.3) and "D 12.3 points" in plausibility.words(None, 12.3)
 
 
-def test_the_committed_mirrored_table_is_plausible_in_three_cells_and_not_as_a_whole():
+def test_the_committed_mirrored_table_is_plausible_in_two_cells_and_not_as_a_whole():
+    # The committed record is the judgement of the committed cells, and it says what the README and claims.md say.
     data = json.loads((ROOT / "runs" / "frame_constant" / "eval" / "claims.json").read_text())
-    record = plausibility.judge(data["frames"]["viscous_mirror"]["recipes"][0]["cells"], LEVEL)
+    recipe = data["frames"]["viscous_mirror"]["recipes"][0]
+    record = plausibility.judge(recipe["cells"], LEVEL)
+    assert record == recipe["plausibility"]
     plausible = [(c["learning"], c["test"]) for c in record["cells"] if c["plausible"]]
-    assert plausible == [("random", "none"), ("random", "viscous"), ("random_nopast", "none")]
-    assert record["D"] == pytest.approx(20.66, abs=0.01) and record["pairs_D"]["high"] == pytest.approx(20.41, abs=0.01)
+    assert plausible == [("random", "viscous"), ("random_nopast", "none")]
+    assert record["D"] == pytest.approx(20.78, abs=0.01) and record["pairs_D"]["high"] == pytest.approx(20.38, abs=0.01)
     assert 0.95 < record["paper_D_above"] < 0.99 and not record["plausible"]
 
 

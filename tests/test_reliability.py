@@ -110,6 +110,7 @@ def test_evaluate_says_that_a_run_is_live_and_reads_a_whole_checkpoint(live_run,
     monkeypatch.setattr(evaluate, "evaluate_run", lambda run: evaluated.append(run) or evaluate.Results({}, None))
     monkeypatch.setattr(evaluate, "write_results", lambda *args: None)
     monkeypatch.setattr(evaluate_cli.report, "summary_text", lambda *args: "the closing screen")
+    monkeypatch.setattr(evaluate_cli.anatomy_report, "headlines", lambda *args, **kw: {})
     assert evaluate_cli.main([str(out), "--out", str(tmp_path / "eval")]) == 0
     note, summary, written = capsys.readouterr().err.splitlines()
     (run,) = evaluated

@@ -269,8 +269,9 @@ def summarize(m: Labelled, learners, recipe_of, recipes, cfg: Config) -> dict:
       cfg: model config.
 
     Returns:
-      {"labels", "limits_deg" (each out's limit), "thresholds", "pairs_per_network", "per_network", "frame",
-      "recipes", "frames"}: the first frame's recipes at the top, the others' under "frames" as in claims.json.
+      {"labels", "limits_deg" (each out's limit), "thresholds", "level" (the intervals' coverage),
+      "pairs_per_network", "per_network", "frame", "recipes", "frames"}: the first frame's recipes at the top, the
+      others' under "frames" as in claims.json.
     """
     judged = {f: frame_cells(m, learners, recipe_of, f, recipes, cfg) for f in frames.frame_list(cfg)}
     first, *others = judged
@@ -281,6 +282,7 @@ def summarize(m: Labelled, learners, recipe_of, recipes, cfg: Config) -> dict:
             zip(OUT_LIMITS, map(math.degrees, (*cfg.arm.theta1_range, cfg.arm.theta2_min)), strict=True)
         ),
         "thresholds": {name: getattr(e, name) for name in vars(e) if name.startswith("anatomy_")},
+        "level": cfg.claims.level,
         "pairs_per_network": int(m.label.shape[-1]),
         "per_network": per_network(m, learners, recipe_of, cfg),
         "frame": first,
