@@ -107,7 +107,9 @@ def test_evaluate_says_that_a_run_is_live_and_reads_a_whole_checkpoint(live_run,
     proc, out = live_run
     evaluated = []
     # The episodes and files are test_evaluate's; here only what is read from the live run matters.
-    monkeypatch.setattr(evaluate, "evaluate_run", lambda run: evaluated.append(run) or evaluate.Results({}, None))
+    monkeypatch.setattr(
+        evaluate, "evaluate_run", lambda run: evaluated.append(run) or evaluate.Results({"anatomy": {}}, None)
+    )
     monkeypatch.setattr(evaluate, "write_results", lambda *args: None)
     monkeypatch.setattr(evaluate_cli.report, "summary_text", lambda *args: "the closing screen")
     monkeypatch.setattr(evaluate_cli.anatomy_report, "headlines", lambda *args, **kw: {})
