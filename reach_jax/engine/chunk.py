@@ -14,7 +14,7 @@ from jax.sharding import PartitionSpec
 from reach_jax.agent import network
 from reach_jax.config import Config
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
-from reach_jax.engine import distribute, random_stream, rollout
+from reach_jax.engine import distribute, native, random_stream, rollout
 from reach_jax.engine.learner_state import LearnerState
 from reach_jax.env import trial_log
 
@@ -156,9 +156,12 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_S
       cfg: model config.
       n_steps: learner steps per call.
       devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
-      speed: how the loop is compiled; the result does not depend on it.
+      speed: how the loop is compiled and its engine (`native.resolve` decides "auto"); the result does not
+        depend on it.
     """
-    chunk = chunk_body(cfg, n_steps, speed)
+    speed = native.resolve(cfg, speed)[0] if speed.engine == "auto" else speed
+    body = native.chunk_body if speed.engine == "native" else chunk_body
+    chunk = body(cfg, n_steps, speed)
     compiled, donated = {}, (0,) if speed.donate else ()
 
     def run(states, plans, hypers, budget):

@@ -20,7 +20,7 @@ from reach_jax.config import (
 )
 from reach_jax.config.hyperparameter import Hyperparameter
 from reach_jax.config.overlay import PAPER_HYPER
-from reach_jax.config.schema import DEFAULT_SPEED, MAX_HIDDEN_PAD
+from reach_jax.config.schema import DEFAULT_SPEED, ENGINES, MAX_HIDDEN_PAD
 from reach_jax.engine import distribute
 from reach_jax.errors import (
     Parser,
@@ -183,6 +183,13 @@ def _add_infrastructure_arguments(infra) -> None:
         type=_hidden_pad,
         help=f"pad the first hidden layer to a multiple of this inside the compiled loop (speed only, not stored; "
         f"1 = off; default {DEFAULT_SPEED.hidden_pad})",
+    )
+    infra.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default=DEFAULT_SPEED.engine,
+        help="the step loop's engine: native (a C++ kernel, on CPU), jax, or auto (native where it can run); "
+        "either gives the same bits, and a run resumes under either (default auto)",
     )
     infra.add_argument(
         "--multihost",

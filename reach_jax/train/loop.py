@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -137,7 +138,9 @@ def run(
     if isinstance(cfg, Prepared) and (run_dir is not None or resume or speed != DEFAULT_SPEED):
         raise TypeError("a prepared run carries its run_dir, resume and speed")
     prep = cfg if isinstance(cfg, Prepared) else prepare(cfg, run_dir, resume=resume, speed=speed)
-    writer = jax.process_index() == 0  # one writer when several processes share the run directory
+    writer = jax.process_index() == 0
+    if prep.notice and writer:
+        print(prep.notice, file=sys.stderr if stream is None else stream, flush=True)  # one writer when several processes share the run directory
     with run_lock.hold(prep.run_dir) if writer else contextlib.nullcontext(), interrupt.catch() as stop:
         group, table = begin(prep), batch.learner_table(prep.cfg.train)
         sinks = _sinks(prep, group, table, progress, devices, stream) if writer else []

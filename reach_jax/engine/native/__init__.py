@@ -8,27 +8,54 @@ engine. `build` compiles the kernel on first use.
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from reach_jax.config import Config
 from reach_jax.config.schema import Speed
-from reach_jax.engine import random_stream
+from reach_jax.engine import random_stream, xla_options
 from reach_jax.engine.native import build, layout
 
 BLOCK = 512  # steps a kernel call: their draws are drawn in one vectorised call before it
 
-__all__ = ["BLOCK", "build", "chunk_body", "layout", "unsupported"]
+__all__ = ["BLOCK", "build", "chunk_body", "layout", "resolve", "target", "unsupported"]
 
 
-def unsupported(cfg: Config) -> str | None:
-    """Why the kernel does not cover learners of `cfg` (they train on the JAX engine), or None if it does."""
+def unsupported(cfg: Config, speed: Speed) -> str | None:
+    """Why the kernel does not cover learners of `cfg` run at `speed` (they train on the JAX engine), or None."""
     if cfg.train.trial_log_every:
-        return "the per-trial log (--trial-log-every)"
+        return "it does not write the per-trial log (--trial-log-every) yet"
     if len(cfg.network.hidden) != 2:
-        return "a network of other than two hidden layers"
+        return "it covers networks of two hidden layers only"
+    if not speed.sparse_layer1:
+        return "it computes the sparse layer 1 only"
+    if jax.default_backend() != "cpu":
+        return f"it runs on CPU only, not {jax.default_backend()}"
+    if xla_options.engine() != "cpu-exact":
+        return f"it rounds as cpu-exact, and this process runs {xla_options.engine()}"
     return None
+
+
+def resolve(cfg: Config, speed: Speed) -> tuple[Speed, str | None]:
+    """(speed with its engine decided, "jax" or "native"; the one-line notice of a native engine not used, or None).
+
+    "auto" and "native" take the native kernel where it covers the learners and builds (`build.load`, on first use);
+    elsewhere they fall back to the JAX engine with a notice. "jax" always runs the JAX engine, silently.
+    """
+    if speed.engine == "jax":
+        return speed, None
+    why = unsupported(cfg, speed)
+    if why is None:
+        try:
+            target(cfg, speed)
+        except build.Failure as e:
+            why = str(e)
+    if why is None:
+        return dataclasses.replace(speed, engine="native"), None
+    return dataclasses.replace(speed, engine="jax"), f"training on the JAX engine: the native engine is not used ({why})"
 
 
 def target(cfg: Config, speed: Speed) -> str:

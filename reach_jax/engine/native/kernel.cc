@@ -44,8 +44,8 @@ inline float xla_exp(float x) {
   x = (x >= -87.8f || x != x) ? x : -87.8f;
   x = (x <= 88.8f || x != x) ? x : 88.8f;
   float fx = std::floor(0.5f + x * bits(0x3FB8AA3B));
-  fx = (fx >= -127.0f || fx != fx) ? fx : -127.0f;
-  fx = (fx <= 127.0f || fx != fx) ? fx : 127.0f;
+  fx = (fx >= -127.0f) ? fx : -127.0f;  // fx is never NaN here unless x is, and then it stays NaN either way
+  fx = (fx <= 127.0f) ? fx : 127.0f;
   float r = x - bits(0x3F318000) * fx;
   r = r - bits(0xB95E8083) * fx;
   float y = bits(0x3AB743CE) + r * bits(0x39506967);
@@ -55,7 +55,10 @@ inline float xla_exp(float x) {
   y = 0.5f + y * r;
   y = 1.0f + (r + y * (r * r));
   int32_t n = static_cast<int32_t>(fx);
-  return y * bits(static_cast<uint32_t>(n + 127) << 23);
+  int32_t e = (n + 127) << 23;
+  float scale;
+  std::memcpy(&scale, &e, 4);
+  return y * scale;
 }
 
 // The sigmoid 1 / (1 + exp(-u)); the network's f(u) is it less 0.5.
@@ -263,31 +266,36 @@ inline void ts_step(const float* c, float* f, const int* is, const float* x, con
     for (int j = 0; j < H1; ++j) u1[j] = u1[j] + xv * w[j];
   }
   for (int j = 0; j < H1; ++j) u1[j] = u1[j] + b1[j];
-  // The previous input's activations are kept with their sigmoids (sg), from which the backprop takes f'.
+  // The previous input's activations are kept with their sigmoids (g*), from which the backprop takes f'. Each
+  // layer's sums run over its inputs in order (XLA's reduction order), vectorised across its units.
   float h1n[H1], h1p[H1], g1p[H1], h2n[H2], h2p[H2], g2p[H2], on[NO], op[NO], gop[NO];
   for (int j = 0; j < H1; ++j) {
-    h1n[j] = squash(u1[j]);
+    h1n[j] = sigmoid(u1[j]) - 0.5f;
     g1p[j] = sigmoid(f[F_PU1 + j]);
     h1p[j] = g1p[j] - 0.5f;
   }
-  for (int k = 0; k < H2; ++k) {
-    float sn = 0.0f, sp = 0.0f;
-    for (int j = 0; j < H1; ++j) {
-      sn = sn + h1n[j] * w2[j * H2 + k];
-      sp = sp + h1p[j] * w2[j * H2 + k];
+  float sn[H2], sp[H2];
+  for (int k = 0; k < H2; ++k) sn[k] = sp[k] = 0.0f;
+  for (int j = 0; j < H1; ++j)
+    for (int k = 0; k < H2; ++k) {
+      sn[k] = sn[k] + h1n[j] * w2[j * H2 + k];
+      sp[k] = sp[k] + h1p[j] * w2[j * H2 + k];
     }
-    h2n[k] = squash(sn + b2[k]);
-    g2p[k] = sigmoid(sp + b2[k]);
+  for (int k = 0; k < H2; ++k) {
+    h2n[k] = sigmoid(sn[k] + b2[k]) - 0.5f;
+    g2p[k] = sigmoid(sp[k] + b2[k]);
     h2p[k] = g2p[k] - 0.5f;
   }
-  for (int k = 0; k < NO; ++k) {
-    float sn = 0.0f, sp = 0.0f;
-    for (int j = 0; j < H2; ++j) {
-      sn = sn + h2n[j] * w3[j * NO + k];
-      sp = sp + h2p[j] * w3[j * NO + k];
+  float tn[NO], tp[NO];
+  for (int k = 0; k < NO; ++k) tn[k] = tp[k] = 0.0f;
+  for (int j = 0; j < H2; ++j)
+    for (int k = 0; k < NO; ++k) {
+      tn[k] = tn[k] + h2n[j] * w3[j * NO + k];
+      tp[k] = tp[k] + h2p[j] * w3[j * NO + k];
     }
-    on[k] = squash(sn + b3[k]);
-    gop[k] = sigmoid(sp + b3[k]);
+  for (int k = 0; k < NO; ++k) {
+    on[k] = sigmoid(tn[k] + b3[k]) - 0.5f;
+    gop[k] = sigmoid(tp[k] + b3[k]);
     op[k] = gop[k] - 0.5f;
   }
   // ts_targets.
@@ -321,10 +329,12 @@ inline void ts_step(const float* c, float* f, const int* is, const float* x, con
   }
   for (int k = 0; k < NO; ++k) b3[k] = b3[k] - scaled[k];
   for (int k = 0; k < H2; ++k) scaled[k] = step * delta2[k];
+  float acc[H1];
+  for (int j = 0; j < H1; ++j) acc[j] = 0.0f;
+  for (int k = 0; k < H2; ++k)
+    for (int j = 0; j < H1; ++j) acc[j] = acc[j] + w2[j * H2 + k] * delta2[k];
   for (int j = 0; j < H1; ++j) {
-    float s = 0.0f;
-    for (int k = 0; k < H2; ++k) s = s + w2[j * H2 + k] * delta2[k];
-    delta1[j] = s * slope(g1p[j]);
+    delta1[j] = acc[j] * slope(g1p[j]);
     for (int k = 0; k < H2; ++k) w2[j * H2 + k] = w2[j * H2 + k] - h1p[j] * scaled[k];
   }
   for (int k = 0; k < H2; ++k) b2[k] = b2[k] - scaled[k];
