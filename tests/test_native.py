@@ -148,7 +148,8 @@ def test_every_kind_of_learner_trains_bit_identically_on_either_engine(kind):
         ends[engine] = jax.device_get(states)
     trials = np.asarray(ends["jax"].env.trials)
     assert trials.min() > 5, trials
-    for (path, a), b in zip(jax.tree_util.tree_leaves_with_path(ends["jax"]), jax.tree.leaves(ends["native"])):
+    pairs = zip(jax.tree_util.tree_leaves_with_path(ends["jax"]), jax.tree.leaves(ends["native"]), strict=True)
+    for (path, a), b in pairs:
         assert np.asarray(a).tobytes() == np.asarray(b).tobytes(), jax.tree_util.keystr(path)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.sharding import PartitionSpec
 
 from reach_jax.agent import network
@@ -132,6 +133,48 @@ def chunk_body(cfg: Config, n_steps: int, speed: Speed):
     return chunk
 
 
+def native_chunk_body(cfg: Config, n_steps: int, speed: Speed):
+    """Uncompiled chunk of one device on the native kernel: (states, plans, hypers, budget) -> (states, None).
+
+    The same function as `chunk_body` without a per-trial log, bit for bit (`native.unsupported` says which learners
+    it covers). Stats are reset at its start.
+    """
+    name = native.target(cfg, speed)
+    consts = native.layout.consts_vector(cfg)
+
+    def chunk(states, plans, hypers, budget):
+        counters = states.counters
+        states = states.replace(counters=counters.replace(stats=jax.tree.map(jnp.zeros_like, counters.stats)))
+        wide = widen_hidden(states, speed.hidden_pad)
+        f, i = native.layout.pack_state(wide)
+        pf, pi, n_blocks, n_cond = native.layout.pack_plan(plans)
+        hy = native.layout.pack_hyper(hypers)
+        keys = states.key
+        call = jax.ffi.ffi_call(
+            name,
+            (jax.ShapeDtypeStruct(f.shape, jnp.float32), jax.ShapeDtypeStruct(i.shape, jnp.int32)),
+            input_output_aliases={1: 0, 2: 1},
+        )
+        step_col = len(native.layout.INT_FIELDS) - 1
+
+        def run_block(carry, n: int):
+            f, i = carry
+            u = jax.vmap(lambda k, first: random_stream.step_uniforms(k, first, n, cfg))(keys, i[:, step_col])
+            u = jnp.swapaxes(u, 0, 1)
+            return call(jnp.asarray(consts), f, i, hy, pf, pi, u, jnp.reshape(budget, (1,)).astype(jnp.int32),
+                        nb=np.int64(n_blocks), ncond=np.int64(n_cond))  # fmt: skip
+
+        block = block_size(n_steps, native.BLOCK)
+        n_full, rest = divmod(n_steps, block)
+        carry = jax.lax.scan(lambda c, _: (run_block(c, block), None), (f, i), None, length=n_full)[0]
+        if rest:
+            carry = run_block(carry, rest)
+        out = native.layout.unpack_state(*carry, wide)
+        return narrow_hidden(out, cfg), None
+
+    return chunk
+
+
 def make_trace(cfg: Config, n_steps: int, speed: Speed = DEFAULT_SPEED):
     """Compiled run of one learner that keeps what every step did: `(state, plan, hyper) -> (state, StepInfo)`.
 
@@ -160,7 +203,7 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_S
         depend on it.
     """
     speed = native.resolve(cfg, speed)[0] if speed.engine == "auto" else speed
-    body = native.chunk_body if speed.engine == "native" else chunk_body
+    body = native_chunk_body if speed.engine == "native" else chunk_body
     chunk = body(cfg, n_steps, speed)
     compiled, donated = {}, (0,) if speed.donate else ()
 

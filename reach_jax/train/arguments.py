@@ -29,6 +29,8 @@ from reach_jax.errors import (
     whole_number,
 )
 
+ENGINE_HELP = "the step loop's engine: native (C++, CPU), jax, or auto (native where it runs); same bits (default auto)"
+
 
 def _hidden_pad(text: str) -> int:
     return whole_number(text, 1, MAX_HIDDEN_PAD)
@@ -184,13 +186,7 @@ def _add_infrastructure_arguments(infra) -> None:
         help=f"pad the first hidden layer to a multiple of this inside the compiled loop (speed only, not stored; "
         f"1 = off; default {DEFAULT_SPEED.hidden_pad})",
     )
-    infra.add_argument(
-        "--engine",
-        choices=ENGINES,
-        default=DEFAULT_SPEED.engine,
-        help="the step loop's engine: native (a C++ kernel, on CPU), jax, or auto (native where it can run); "
-        "either gives the same bits, and a run resumes under either (default auto)",
-    )
+    infra.add_argument("--engine", choices=ENGINES, default=DEFAULT_SPEED.engine, help=ENGINE_HELP)
     infra.add_argument(
         "--multihost",
         nargs="?",

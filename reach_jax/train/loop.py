@@ -95,7 +95,10 @@ def chunks(prep: Prepared, group: batch.Batch, devices=None, stop: interrupt.Sto
 
 
 def _sinks(prep: Prepared, group, table, progress: bool, devices, stream) -> list[Sink]:
-    """The writing process's sinks: the metrics, the checkpoints and, with `progress`, the bar (`run`'s Args)."""
+    """The writing process's sinks: the metrics, the checkpoints and, with `progress`, the bar (`run`'s Args); it says
+    the engine's notice first, if there is one (`native.resolve`)."""
+    if prep.notice:
+        print(prep.notice, file=sys.stderr if stream is None else stream, flush=True)
     sinks: list[Sink] = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
     if progress:
         n_devices = len(devices if devices is not None else jax.devices())
@@ -138,9 +141,7 @@ def run(
     if isinstance(cfg, Prepared) and (run_dir is not None or resume or speed != DEFAULT_SPEED):
         raise TypeError("a prepared run carries its run_dir, resume and speed")
     prep = cfg if isinstance(cfg, Prepared) else prepare(cfg, run_dir, resume=resume, speed=speed)
-    writer = jax.process_index() == 0
-    if prep.notice and writer:
-        print(prep.notice, file=sys.stderr if stream is None else stream, flush=True)  # one writer when several processes share the run directory
+    writer = jax.process_index() == 0  # one writer when several processes share the run directory
     with run_lock.hold(prep.run_dir) if writer else contextlib.nullcontext(), interrupt.catch() as stop:
         group, table = begin(prep), batch.learner_table(prep.cfg.train)
         sinks = _sinks(prep, group, table, progress, devices, stream) if writer else []

@@ -120,7 +120,7 @@ def _params(params) -> list[jax.Array]:
 
 
 def pack_state(states: LearnerState) -> tuple[jax.Array, jax.Array]:
-    """(L, NF) float32 and (L, NI) int32 rows of widened learner states (`chunk.widen_hidden`), in the kernel's order."""
+    """(L, NF) float32 and (L, NI) int32 rows of widened learner states (`chunk.widen_hidden`), as the kernel reads."""
     a, e = states.agent, states.env
     n = e.trials.shape[0]
     tr, pend = e.trial, a.pending
