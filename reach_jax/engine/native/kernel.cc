@@ -232,135 +232,238 @@ inline void observe(const float* c, const float* f, float* x, int* rows) {
     const float* e = c + C_ENC + 5 * k;  // lo, hi, 1 / step, units, offset
     int n = static_cast<int>(e[3]), off = static_cast<int>(e[4]);
     float pos = (clip(signal[k], e[0], e[1]) - e[0]) * e[2];
-    for (int i = 0; i < n; ++i)
-      x[off + i] = xmax(0.0f, 1.0f - std::fabs(pos - static_cast<float>(i))) * mask[off + i];
     int first = static_cast<int>(std::floor(pos));
     first = first < 0 ? 0 : (first > n - 2 ? n - 2 : first);
+    // Every unit but the two neighbours of pos is max(0, 1 - |pos - i|) = +0 exactly (`encoding.localize_support`).
+    for (int i = 0; i < n; ++i) x[off + i] = 0.0f;
+    for (int i = first; i < first + 2; ++i)
+      x[off + i] = xmax(0.0f, 1.0f - std::fabs(pos - static_cast<float>(i))) * mask[off + i];
     rows[2 * k] = off + first;
     rows[2 * k + 1] = off + first + 1;
   }
 }
 
-struct Out {
-  float out[NO];
-  float u1_next[H1];
+// Learners along the SIMD lanes: eight at a time, one a lane, for layers 2 and 3 of the network, whose units are too
+// few to fill a vector. Each lane does exactly one learner's operations in the JAX step's order, so lanes never mix.
+constexpr int LANES = 8;
+typedef float v8 __attribute__((vector_size(32)));
+typedef int32_t i8 __attribute__((vector_size(32)));
+typedef float v8u __attribute__((vector_size(32), aligned(4)));  // an unaligned load or store of 8 floats
+
+inline v8 load(const float* p) { return *reinterpret_cast<const v8u*>(p); }
+inline void store(float* p, v8 a) { *reinterpret_cast<v8u*>(p) = a; }
+
+inline v8 splat(float a) { return v8{a, a, a, a, a, a, a, a}; }
+inline v8 as_v8(i8 a) {
+  v8 r;
+  std::memcpy(&r, &a, 32);
+  return r;
+}
+inline i8 as_i8(v8 a) {
+  i8 r;
+  std::memcpy(&r, &a, 32);
+  return r;
+}
+inline v8 sel(i8 m, v8 a, v8 b) { return m ? a : b; }  // m: all ones (true) or zero per lane
+inline v8 vmax(v8 a, v8 b) {  // llvm.maximum per lane: NaN wins, +0 > -0
+  v8 r = sel(a > b, a, b);
+  r = sel(a == b, as_v8(as_i8(a) & as_i8(b)), r);
+  return sel(a != a, a, r);
+}
+inline v8 vmin(v8 a, v8 b) {
+  v8 r = sel(a < b, a, b);
+  r = sel(a == b, as_v8(as_i8(a) | as_i8(b)), r);
+  return sel(a != a, a, r);
+}
+inline v8 vfloor(v8 x) {
+  v8 r;
+  for (int i = 0; i < LANES; ++i) r[i] = std::floor(x[i]);
+  return r;
+}
+// xla_exp per lane.
+inline v8 vexp(v8 x) {
+  x = sel((x >= -87.8f) | (x != x), x, splat(-87.8f));
+  x = sel((x <= 88.8f) | (x != x), x, splat(88.8f));
+  v8 fx = vfloor(0.5f + x * bits(0x3FB8AA3B));
+  fx = sel(fx >= -127.0f, fx, splat(-127.0f));
+  fx = sel(fx <= 127.0f, fx, splat(127.0f));
+  v8 r = x - bits(0x3F318000) * fx;
+  r = r - bits(0xB95E8083) * fx;
+  v8 y = bits(0x3AB743CE) + r * bits(0x39506967);
+  y = bits(0x3C088908) + y * r;
+  y = bits(0x3D2AA9C1) + y * r;
+  y = bits(0x3E2AAAAA) + y * r;
+  y = 0.5f + y * r;
+  y = 1.0f + (r + y * (r * r));
+  i8 n = __builtin_convertvector(fx, i8);
+  return y * as_v8((n + 127) << 23);
+}
+inline v8 vsigmoid(v8 u) { return 1.0f / (vexp(-u) + 1.0f); }
+inline v8 vslope(v8 sg) { return sg * (0.5f - (sg - 0.5f)); }
+
+// Layers 2 and 3 of eight learners, in lanes: weights [input][unit][lane], kept so for a whole kernel call.
+struct Group {
+  v8 w2[H1][H2], b2[H2], w3[H2][NO], b3[NO];
 };
 
-// learner.ts_step with the sparse layer 1: W(t) -> W(t+1) in place; the outputs at x(t) and the next Pending.u1.
-inline void ts_step(const float* c, float* f, const int* is, const float* x, const int* rows, float lr,
-                    const float* hy, Out& res) {
-  float* w1 = f + F_W1;
-  float* b1 = f + F_B1;
-  float* w2 = f + F_W2;
-  float* b2 = f + F_B2;
-  float* w3 = f + F_W3;
-  float* b3 = f + F_B3;
-  const float* px = f + F_PX;
-  float u1[H1];
-  for (int j = 0; j < H1; ++j) u1[j] = 0.0f;
-  for (int i = 0; i < NVIS; ++i)
-    for (int j = 0; j < H1; ++j) u1[j] = u1[j] + x[i] * w1[i * H1 + j];
-  for (int k = 0; k < 2 * NCODE; ++k) {
-    const float xv = x[rows[k]];
-    const float* w = w1 + rows[k] * H1;
-    for (int j = 0; j < H1; ++j) u1[j] = u1[j] + xv * w[j];
-  }
-  for (int j = 0; j < H1; ++j) u1[j] = u1[j] + b1[j];
-  // The previous input's activations are kept with their sigmoids (g*), from which the backprop takes f'. Each
-  // layer's sums run over its inputs in order (XLA's reduction order), vectorised across its units.
-  float h1n[H1], h1p[H1], g1p[H1], h2n[H2], h2p[H2], g2p[H2], on[NO], op[NO], gop[NO];
-  for (int j = 0; j < H1; ++j) {
-    h1n[j] = sigmoid(u1[j]) - 0.5f;
-    g1p[j] = sigmoid(f[F_PU1 + j]);
-    h1p[j] = g1p[j] - 0.5f;
-  }
-  float sn[H2], sp[H2];
-  for (int k = 0; k < H2; ++k) sn[k] = sp[k] = 0.0f;
+// What the lanes take from each learner's layer 1 and pending step, and give back.
+struct Lanes {
+  v8 h1n[H1], g1p[H1];                                          // in: x(t)'s and x(t-1)'s first hidden layer
+  v8 valid, terminal, reward, pout[NO], prnd[2], pgain, nmax;  // in: the pending step (valid, terminal: 0 or 1)
+  v8 lr, baseline, bound;                                       // in: the step size (0 frozen) and the actor's form
+  v8 out[NO], step, delta1[H1];                                 // out: x(t)'s outputs, the step, layer 1's error
+};
+
+// Forward x(t) and x(t-1) through layers 2-3 and the TS update of layers 2-3 (`learner.ts_step`), in lanes.
+inline void lanes_step(const float* c, Group& g, Lanes& a) {
+  v8 h1p[H1];
+  for (int j = 0; j < H1; ++j) h1p[j] = a.g1p[j] - 0.5f;
+  v8 sn[H2], sp[H2];
+  for (int k = 0; k < H2; ++k) sn[k] = sp[k] = splat(0.0f);
   for (int j = 0; j < H1; ++j)
     for (int k = 0; k < H2; ++k) {
-      sn[k] = sn[k] + h1n[j] * w2[j * H2 + k];
-      sp[k] = sp[k] + h1p[j] * w2[j * H2 + k];
+      sn[k] = sn[k] + a.h1n[j] * g.w2[j][k];
+      sp[k] = sp[k] + h1p[j] * g.w2[j][k];
     }
+  v8 h2n[H2], g2p[H2], h2p[H2];
   for (int k = 0; k < H2; ++k) {
-    h2n[k] = sigmoid(sn[k] + b2[k]) - 0.5f;
-    g2p[k] = sigmoid(sp[k] + b2[k]);
+    h2n[k] = vsigmoid(sn[k] + g.b2[k]) - 0.5f;
+    g2p[k] = vsigmoid(sp[k] + g.b2[k]);
     h2p[k] = g2p[k] - 0.5f;
   }
-  float tn[NO], tp[NO];
-  for (int k = 0; k < NO; ++k) tn[k] = tp[k] = 0.0f;
+  v8 tn[NO], tp[NO], gop[NO], op[NO];
+  for (int k = 0; k < NO; ++k) tn[k] = tp[k] = splat(0.0f);
   for (int j = 0; j < H2; ++j)
     for (int k = 0; k < NO; ++k) {
-      tn[k] = tn[k] + h2n[j] * w3[j * NO + k];
-      tp[k] = tp[k] + h2p[j] * w3[j * NO + k];
+      tn[k] = tn[k] + h2n[j] * g.w3[j][k];
+      tp[k] = tp[k] + h2p[j] * g.w3[j][k];
     }
   for (int k = 0; k < NO; ++k) {
-    on[k] = sigmoid(tn[k] + b3[k]) - 0.5f;
-    gop[k] = sigmoid(tp[k] + b3[k]);
+    a.out[k] = vsigmoid(tn[k] + g.b3[k]) - 0.5f;
+    gop[k] = vsigmoid(tp[k] + g.b3[k]);
     op[k] = gop[k] - 0.5f;
   }
   // ts_targets.
-  const bool valid = is[I_PVALID] != 0, terminal = is[I_PTERM] != 0;
-  const float* pout = f + F_POUT;
-  float p_next = terminal ? f[F_PREW] : on[0];
-  float step_cost = c[C_P_RANGE] / f[F_NMAX];
-  float critic = p_next - step_cost;
-  critic = terminal ? critic : xmax(critic, c[C_CRITIC_FLOOR]);
-  float target[NO];
+  const i8 valid = a.valid != 0.0f, terminal = a.terminal != 0.0f;
+  const v8 p_next = sel(terminal, a.reward, a.out[0]);
+  const v8 step_cost = c[C_P_RANGE] / a.nmax;
+  v8 critic = p_next - step_cost;
+  critic = sel(terminal, critic, vmax(critic, splat(c[C_CRITIC_FLOOR])));
+  v8 target[NO];
   target[0] = critic;
-  const float bound = hy[HY_BOUND];
   for (int i = 0; i < 2; ++i) {
-    float a = pout[1 + i] + f[F_PRND + i] * f[F_PGAIN] * ((p_next - pout[0]) - hy[HY_BASE] * step_cost);
-    target[1 + i] = bound > 0.0f ? clip(a, -bound, bound) : a;
+    v8 t = a.pout[1 + i] + a.prnd[i] * a.pgain * ((p_next - a.pout[0]) - a.baseline * step_cost);
+    target[1 + i] = sel(a.bound > 0.0f, vmin(vmax(t, -a.bound), a.bound), t);
   }
-  float delta3[NO];
-  const float step = valid ? lr : 0.0f;
+  v8 delta3[NO], scaled[NO];
+  a.step = sel(valid, a.lr, splat(0.0f));
   for (int k = 0; k < NO; ++k) {
-    float err = valid ? target[k] - op[k] : 0.0f;
-    delta3[k] = -err * slope(gop[k]);
+    v8 err = sel(valid, target[k] - op[k], splat(0.0f));
+    delta3[k] = -err * vslope(gop[k]);
+    scaled[k] = a.step * delta3[k];
   }
   // Backprop through the old weights, each layer's SGD step as the signal passes it.
-  float delta2[H2], delta1[H1], scaled[H1];
-  for (int k = 0; k < NO; ++k) scaled[k] = step * delta3[k];
+  v8 delta2[H2], scaled2[H2];
   for (int j = 0; j < H2; ++j) {
-    float s = 0.0f;
-    for (int k = 0; k < NO; ++k) s = s + w3[j * NO + k] * delta3[k];
-    delta2[j] = s * slope(g2p[j]);
-    for (int k = 0; k < NO; ++k) w3[j * NO + k] = w3[j * NO + k] - h2p[j] * scaled[k];
+    v8 sum = splat(0.0f);
+    for (int k = 0; k < NO; ++k) sum = sum + g.w3[j][k] * delta3[k];
+    delta2[j] = sum * vslope(g2p[j]);
+    for (int k = 0; k < NO; ++k) g.w3[j][k] = g.w3[j][k] - h2p[j] * scaled[k];
   }
-  for (int k = 0; k < NO; ++k) b3[k] = b3[k] - scaled[k];
-  for (int k = 0; k < H2; ++k) scaled[k] = step * delta2[k];
-  float acc[H1];
-  for (int j = 0; j < H1; ++j) acc[j] = 0.0f;
-  for (int k = 0; k < H2; ++k)
-    for (int j = 0; j < H1; ++j) acc[j] = acc[j] + w2[j * H2 + k] * delta2[k];
+  for (int k = 0; k < NO; ++k) g.b3[k] = g.b3[k] - scaled[k];
+  for (int k = 0; k < H2; ++k) scaled2[k] = a.step * delta2[k];
   for (int j = 0; j < H1; ++j) {
-    delta1[j] = acc[j] * slope(g1p[j]);
-    for (int k = 0; k < H2; ++k) w2[j * H2 + k] = w2[j * H2 + k] - h1p[j] * scaled[k];
+    v8 sum = splat(0.0f);
+    for (int k = 0; k < H2; ++k) sum = sum + g.w2[j][k] * delta2[k];
+    a.delta1[j] = sum * vslope(a.g1p[j]);
+    for (int k = 0; k < H2; ++k) g.w2[j][k] = g.w2[j][k] - h1p[j] * scaled2[k];
   }
-  for (int k = 0; k < H2; ++k) b2[k] = b2[k] - scaled[k];
-  for (int j = 0; j < H1; ++j) scaled[j] = step * delta1[j];
-  for (int i = 0; i < NIN; ++i) {
-    const float xv = px[i];
-    if (xv == 0.0f) continue;  // w - 0 * s is w: no weight is ever -0
-    float* w = w1 + i * H1;
-    for (int j = 0; j < H1; ++j) w[j] = w[j] - xv * scaled[j];
-  }
-  for (int j = 0; j < H1; ++j) b1[j] = b1[j] - scaled[j];
-  // x(t-1) . x(t) as XLA's tree reduction: windows of 32 from one padded zero, then the windows in order.
-  float dot = 0.0f;
-  {
-    float win[(NIN + 1 + 31) / 32];
-    for (int w = 0; w * 32 < NIN + 1; ++w) {
-      float acc = 0.0f;
-      for (int i = w * 32 - 1; i < w * 32 + 31; ++i)
-        if (i >= 0 && i < NIN) acc = acc + px[i] * x[i];
-      win[w] = acc;
+  for (int k = 0; k < H2; ++k) g.b2[k] = g.b2[k] - scaled2[k];
+}
+
+// The rows where a learner's input is not 0, in order.
+struct Rows {
+  int n, at[NVIS + 2 * NCODE];
+};
+
+// Layer 1 of one learner, units along the vector lanes: its pre-activation u1 of x(t) (over the visual rows, then
+// the coded rows in order, as `learner._layer1_input_product`), into lane `l` of `a` with the pending step.
+inline void layer1_in(const float* f, const int* is, const float* hy, const float* x, const int* rows, float* u1,
+                      Rows& nz, Lanes& a, int l) {
+  static_assert(H1 % LANES == 0, "the first hidden layer is padded to whole vectors");
+  constexpr int NV = H1 / LANES;
+  const float* w1 = f + F_W1;
+  v8 acc[NV];
+  for (int v = 0; v < NV; ++v) acc[v] = splat(0.0f);
+  auto add_row = [&](int i) {
+    for (int v = 0; v < NV; ++v) acc[v] = acc[v] + x[i] * load(w1 + i * H1 + v * LANES);
+  };
+  // A row whose input is 0 adds +0 to a sum that is never -0: it is skipped, and so are most of them.
+  nz.n = 0;
+  for (int i = 0; i < NVIS; ++i)
+    if (x[i] != 0.0f) nz.at[nz.n++] = i;
+  for (int k = 0; k < 2 * NCODE; ++k)
+    if (x[rows[k]] != 0.0f) nz.at[nz.n++] = rows[k];
+  for (int r = 0; r < nz.n; ++r) add_row(nz.at[r]);
+  for (int v = 0; v < NV; ++v) {
+    acc[v] = acc[v] + load(f + F_B1 + v * LANES);
+    const v8 h1n = vsigmoid(acc[v]) - 0.5f, g1p = vsigmoid(load(f + F_PU1 + v * LANES));
+    for (int m = 0; m < LANES; ++m) {
+      a.h1n[v * LANES + m][l] = h1n[m];
+      a.g1p[v * LANES + m][l] = g1p[m];
     }
-    for (int w = 0; w * 32 < NIN + 1; ++w) dot = dot + win[w];
   }
+  for (int v = 0; v < NV; ++v) store(u1 + v * LANES, acc[v]);
+  a.valid[l] = static_cast<float>(is[I_PVALID] != 0);
+  a.terminal[l] = static_cast<float>(is[I_PTERM] != 0);
+  a.reward[l] = f[F_PREW];
+  for (int k = 0; k < NO; ++k) a.pout[k][l] = f[F_POUT + k];
+  a.prnd[0][l] = f[F_PRND];
+  a.prnd[1][l] = f[F_PRND + 1];
+  a.pgain[l] = f[F_PGAIN];
+  a.nmax[l] = f[F_NMAX];
+  a.lr[l] = is[I_PLEARN] != 0 ? hy[HY_LR] : 0.0f;
+  a.baseline[l] = hy[HY_BASE];
+  a.bound[l] = hy[HY_BOUND];
+}
+
+// A lane with no learner, or a frozen one: finite values and a zero step, so that its weights stay as they are.
+inline void idle_lane(Lanes& a, int l) {
+  for (int j = 0; j < H1; ++j) {
+    a.h1n[j][l] = 0.0f;
+    a.g1p[j][l] = 0.5f;
+  }
+  a.valid[l] = a.terminal[l] = a.reward[l] = a.pgain[l] = a.lr[l] = a.baseline[l] = a.bound[l] = 0.0f;
+  for (int k = 0; k < NO; ++k) a.pout[k][l] = 0.0f;
+  a.prnd[0][l] = a.prnd[1][l] = 0.0f;
+  a.nmax[l] = 1.0f;
+}
+
+// Layer 1's SGD step of one learner on x(t-1) = its pending x, and the next Pending.u1 (`learner.ts_step`).
+inline void layer1_out(float* f, const float* x, const Rows& nz, const Rows& pnz, const float* u1, const Lanes& a,
+                       int l, const float* c, float* u1_next) {
+  float* w1 = f + F_W1;
+  const float* px = f + F_PX;
+  const float step = a.step[l];
+  float scaled[H1], delta1[H1];
+  for (int j = 0; j < H1; ++j) {
+    delta1[j] = a.delta1[j][l];
+    scaled[j] = step * delta1[j];
+  }
+  for (int r = 0; r < pnz.n; ++r) {  // the other rows: w - 0 s is w, no weight being -0
+    const int i = pnz.at[r];
+    float* w = w1 + i * H1;
+    for (int j = 0; j < H1; ++j) w[j] = w[j] - px[i] * scaled[j];
+  }
+  for (int j = 0; j < H1; ++j) f[F_B1 + j] = f[F_B1 + j] - scaled[j];
+  // x(t-1) . x(t) as XLA's tree reduction: windows of 32 from one padded zero, then the windows in order. Both are
+  // non-negative, so the terms where x(t) is 0 add +0 and are skipped.
+  float win[(NIN + 32) / 32] = {};
+  for (int r = 0; r < nz.n; ++r) win[(nz.at[r] + 1) / 32] = win[(nz.at[r] + 1) / 32] + px[nz.at[r]] * x[nz.at[r]];
+  float dot = 0.0f;
+  for (int w = 0; w < (NIN + 32) / 32; ++w) dot = dot + win[w];
   const float factor = dot + c[C_BIAS_INPUT];
-  for (int j = 0; j < H1; ++j) res.u1_next[j] = u1[j] - step * delta1[j] * factor;
-  for (int k = 0; k < NO; ++k) res.out[k] = on[k];
+  for (int j = 0; j < H1; ++j) u1_next[j] = u1[j] - step * delta1[j] * factor;
 }
 
 inline bool touching(const float* c, const float* a, const float* b) {
@@ -429,18 +532,10 @@ inline void next_trial(const float* c, float* f, int* is, const float* u, const 
   is[I_DRIFTED] = 0;
 }
 
-// rollout.budgeted_step of one learner, in place.
-inline void learner_step(const float* c, float* f, int* is, const float* u, const float* hy, const float* pf,
-                         const int* pi, int nb, int ncond, int budget) {
-  if (!(is[I_TRIALS] < budget)) return;  // frozen: budgeted_step keeps the whole state
-  float x[NIN];
-  int rows[2 * NCODE];
-  observe(c, f, x, rows);
-  const bool learns = is[I_PLEARN] != 0;
-  const float lr = learns ? hy[HY_LR] : 0.0f;
-  Out res;
-  ts_step(c, f, is, x, rows, lr, hy, res);
-  const float* out = res.out;
+// The rest of rollout.budgeted_step of one active learner, in place, after its network's TS step: exploration, the
+// environment's step, the counters and the pending step. x: x(t); out: its outputs; u1_next: the next Pending.u1.
+inline void act_and_step(const float* c, float* f, int* is, const float* u, const float* hy, const float* pf,
+                         const int* pi, int nb, int ncond, const float* x, const float* out, const float* u1_next) {
   // exploration.value_scale, noise, actor_gain.
   const int full_at = is[I_FULLAT], trials = is[I_TRIALS], t = is[I_T];
   const float shortfall = 1.0f - f[F_DIST] * c[C_INV_CUR_HI];
@@ -520,7 +615,7 @@ inline void learner_step(const float* c, float* f, int* is, const float* u, cons
   f[F_PRND] = rnd[0];
   f[F_PRND + 1] = rnd[1];
   f[F_PREW] = (goal ? c[C_REWARD_GOAL] : 0.0f) + (out_of_range ? c[C_REWARD_OUT] : 0.0f);
-  std::memcpy(f + F_PU1, res.u1_next, sizeof(float) * H1);
+  std::memcpy(f + F_PU1, u1_next, sizeof(float) * H1);
   f[F_PGAIN] = gain;
   is[I_PVALID] = !cap;
   is[I_PTERM] = goal || out_of_range;
@@ -563,11 +658,61 @@ inline void learner_step(const float* c, float* f, int* is, const float* u, cons
 extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* istate, const float* hyper,
                                  const float* pf, const int32_t* pi, const float* u, int64_t n_learners,
                                  int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
-  const int64_t npf = ncond * (NFIELD + NIN) + nb, npi = 4 * nb;
+  const int64_t npf = ncond * (NFIELD + NIN) + nb, npi = 4 * nb, n_groups = (n_learners + LANES - 1) / LANES;
+  Group* groups = new Group[n_groups]();
+  // Layers 2 and 3 into lanes for the call, and back at its end.
+  auto lanes = [&](bool in) {
+    for (int64_t l = 0; l < n_learners; ++l) {
+      Group& g = groups[l / LANES];
+      float* f = fstate + l * NF;
+      const int m = l % LANES;
+      for (int j = 0; j < H1; ++j)
+        for (int k = 0; k < H2; ++k) in ? (void)(g.w2[j][k][m] = f[F_W2 + j * H2 + k]) : (void)(f[F_W2 + j * H2 + k] = g.w2[j][k][m]);
+      for (int k = 0; k < H2; ++k) in ? (void)(g.b2[k][m] = f[F_B2 + k]) : (void)(f[F_B2 + k] = g.b2[k][m]);
+      for (int j = 0; j < H2; ++j)
+        for (int k = 0; k < NO; ++k) in ? (void)(g.w3[j][k][m] = f[F_W3 + j * NO + k]) : (void)(f[F_W3 + j * NO + k] = g.w3[j][k][m]);
+      for (int k = 0; k < NO; ++k) in ? (void)(g.b3[k][m] = f[F_B3 + k]) : (void)(f[F_B3 + k] = g.b3[k][m]);
+    }
+  };
+  lanes(true);
+  Rows* pending = new Rows[n_learners];  // the non-zero rows of each learner's pending x, kept from step to step
+  for (int64_t l = 0; l < n_learners; ++l) {
+    pending[l].n = 0;
+    for (int i = 0; i < NIN; ++i)
+      if (fstate[l * NF + F_PX + i] != 0.0f) pending[l].at[pending[l].n++] = i;
+  }
+  Rows nz[LANES];
+  Lanes a;
+  float x[LANES][NIN], u1[LANES][H1], u1_next[H1], out[NO];
+  int rows[LANES][2 * NCODE];
+  bool active[LANES];
   for (int64_t s = 0; s < n_steps; ++s)
-    for (int64_t l = 0; l < n_learners; ++l)
-      learner_step(consts, fstate + l * NF, istate + l * NI, u + (s * n_learners + l) * NU, hyper + l * NH,
-                   pf + l * npf, pi + l * npi, static_cast<int>(nb), static_cast<int>(ncond), budget);
+    for (int64_t g = 0; g < n_groups; ++g) {
+      for (int m = 0; m < LANES; ++m) {
+        const int64_t l = g * LANES + m;
+        active[m] = l < n_learners && istate[l * NI + I_TRIALS] < budget;  // frozen: budgeted_step keeps it all
+        if (!active[m]) {
+          idle_lane(a, m);
+          continue;
+        }
+        observe(consts, fstate + l * NF, x[m], rows[m]);
+        layer1_in(fstate + l * NF, istate + l * NI, hyper + l * NH, x[m], rows[m], u1[m], nz[m], a, m);
+      }
+      lanes_step(consts, groups[g], a);
+      for (int m = 0; m < LANES; ++m) {
+        if (!active[m]) continue;
+        const int64_t l = g * LANES + m;
+        float* f = fstate + l * NF;
+        layer1_out(f, x[m], nz[m], pending[l], u1[m], a, m, consts, u1_next);
+        pending[l] = nz[m];
+        for (int k = 0; k < NO; ++k) out[k] = a.out[k][m];
+        act_and_step(consts, f, istate + l * NI, u + (s * n_learners + l) * NU, hyper + l * NH, pf + l * npf,
+                     pi + l * npi, static_cast<int>(nb), static_cast<int>(ncond), x[m], out, u1_next);
+      }
+    }
+  lanes(false);
+  delete[] groups;
+  delete[] pending;
 }
 
 extern "C" int reach_native_sizes(int64_t* out) {
