@@ -243,139 +243,155 @@ inline void observe(const float* c, const float* f, float* x, int* rows) {
   }
 }
 
-// Learners along the SIMD lanes: eight at a time, one a lane, for layers 2 and 3 of the network, whose units are too
-// few to fill a vector. Each lane does exactly one learner's operations in the JAX step's order, so lanes never mix.
-constexpr int LANES = 8;
-typedef float v8 __attribute__((vector_size(32)));
-typedef int32_t i8 __attribute__((vector_size(32)));
+// Learners along the SIMD lanes, W at a time (8 or 4), one a lane, for layers 2 and 3 of the network, whose
+// units are too few to fill a vector. Each lane does exactly one learner's operations in the JAX step's order, so
+// lanes never mix. Layer 1's 32 units take a vector of 8 the other way, one learner at a time.
+template <int W>
+struct Vec {
+  typedef float f __attribute__((vector_size(4 * W)));
+  typedef int32_t i __attribute__((vector_size(4 * W)));
+};
+template <int W>
+using vf = typename Vec<W>::f;
+template <int W>
+using vi = typename Vec<W>::i;
+typedef vf<8> v8;
 typedef float v8u __attribute__((vector_size(32), aligned(4)));  // an unaligned load or store of 8 floats
 
 inline v8 load(const float* p) { return *reinterpret_cast<const v8u*>(p); }
 inline void store(float* p, v8 a) { *reinterpret_cast<v8u*>(p) = a; }
 
-inline v8 splat(float a) { return v8{a, a, a, a, a, a, a, a}; }
-inline v8 as_v8(i8 a) {
-  v8 r;
-  std::memcpy(&r, &a, 32);
-  return r;
+template <int W>
+inline vf<W> splat(float a) {
+  return vf<W>{} + a;
 }
-inline i8 as_i8(v8 a) {
-  i8 r;
-  std::memcpy(&r, &a, 32);
-  return r;
+template <int W>
+inline vf<W> sel(vi<W> m, vf<W> a, vf<W> b) {  // m: all ones (true) or zero per lane
+  return m ? a : b;
 }
-inline v8 sel(i8 m, v8 a, v8 b) { return m ? a : b; }  // m: all ones (true) or zero per lane
-inline v8 vmax(v8 a, v8 b) {  // llvm.maximum per lane: NaN wins, +0 > -0
-  v8 r = sel(a > b, a, b);
-  r = sel(a == b, as_v8(as_i8(a) & as_i8(b)), r);
-  return sel(a != a, a, r);
+template <int W>
+inline vf<W> vmax(vf<W> a, vf<W> b) {  // llvm.maximum per lane: NaN wins, +0 > -0
+  vf<W> r = sel<W>(a > b, a, b);
+  r = sel<W>(a == b, (vf<W>)((vi<W>)a & (vi<W>)b), r);
+  return sel<W>(a != a, a, r);
 }
-inline v8 vmin(v8 a, v8 b) {
-  v8 r = sel(a < b, a, b);
-  r = sel(a == b, as_v8(as_i8(a) | as_i8(b)), r);
-  return sel(a != a, a, r);
-}
-inline v8 vfloor(v8 x) {
-  v8 r;
-  for (int i = 0; i < LANES; ++i) r[i] = std::floor(x[i]);
-  return r;
+template <int W>
+inline vf<W> vmin(vf<W> a, vf<W> b) {
+  vf<W> r = sel<W>(a < b, a, b);
+  r = sel<W>(a == b, (vf<W>)((vi<W>)a | (vi<W>)b), r);
+  return sel<W>(a != a, a, r);
 }
 // xla_exp per lane.
-inline v8 vexp(v8 x) {
-  x = sel((x >= -87.8f) | (x != x), x, splat(-87.8f));
-  x = sel((x <= 88.8f) | (x != x), x, splat(88.8f));
-  v8 fx = vfloor(0.5f + x * bits(0x3FB8AA3B));
-  fx = sel(fx >= -127.0f, fx, splat(-127.0f));
-  fx = sel(fx <= 127.0f, fx, splat(127.0f));
-  v8 r = x - bits(0x3F318000) * fx;
+template <int W>
+inline vf<W> vexp(vf<W> x) {
+  x = sel<W>((x >= -87.8f) | (x != x), x, splat<W>(-87.8f));
+  x = sel<W>((x <= 88.8f) | (x != x), x, splat<W>(88.8f));
+  vf<W> fx = 0.5f + x * bits(0x3FB8AA3B);
+  for (int i = 0; i < W; ++i) fx[i] = std::floor(fx[i]);
+  fx = sel<W>(fx >= -127.0f, fx, splat<W>(-127.0f));
+  fx = sel<W>(fx <= 127.0f, fx, splat<W>(127.0f));
+  vf<W> r = x - bits(0x3F318000) * fx;
   r = r - bits(0xB95E8083) * fx;
-  v8 y = bits(0x3AB743CE) + r * bits(0x39506967);
+  vf<W> y = bits(0x3AB743CE) + r * bits(0x39506967);
   y = bits(0x3C088908) + y * r;
   y = bits(0x3D2AA9C1) + y * r;
   y = bits(0x3E2AAAAA) + y * r;
   y = 0.5f + y * r;
   y = 1.0f + (r + y * (r * r));
-  i8 n = __builtin_convertvector(fx, i8);
-  return y * as_v8((n + 127) << 23);
+  const vi<W> n = __builtin_convertvector(fx, vi<W>);
+  return y * (vf<W>)((n + 127) << 23);
 }
-inline v8 vsigmoid(v8 u) { return 1.0f / (vexp(-u) + 1.0f); }
-inline v8 vslope(v8 sg) { return sg * (0.5f - (sg - 0.5f)); }
+template <int W>
+inline vf<W> vsigmoid(vf<W> u) {
+  return 1.0f / (vexp<W>(-u) + 1.0f);
+}
+template <int W>
+inline vf<W> vslope(vf<W> sg) {
+  return sg * (0.5f - (sg - 0.5f));
+}
 
-// Layers 2 and 3 of eight learners, in lanes: weights [input][unit][lane], kept so for a whole kernel call.
+// Layers 2 and 3 of W learners, in lanes: weights [input][unit][lane], kept so for a whole kernel call.
+template <int W>
 struct Group {
-  v8 w2[H1][H2], b2[H2], w3[H2][NO], b3[NO];
+  using V = vf<W>;
+  V w2[H1][H2], b2[H2], w3[H2][NO], b3[NO];
 };
 
 // What the lanes take from each learner's layer 1 and pending step, and give back.
+template <int W>
 struct Lanes {
-  v8 h1n[H1], g1p[H1];                                          // in: x(t)'s and x(t-1)'s first hidden layer
-  v8 valid, terminal, reward, pout[NO], prnd[2], pgain, nmax;  // in: the pending step (valid, terminal: 0 or 1)
-  v8 lr, baseline, bound;                                       // in: the step size (0 frozen) and the actor's form
-  v8 out[NO], step, delta1[H1];                                 // out: x(t)'s outputs, the step, layer 1's error
+  using V = vf<W>;
+  V h1n[H1], g1p[H1];                                          // in: x(t)'s and x(t-1)'s first hidden layer
+  V valid, terminal, reward, pout[NO], prnd[2], pgain, nmax;  // in: the pending step (valid, terminal: 0 or 1)
+  V lr, baseline, bound;                                       // in: the step size (0 frozen) and the actor's form
+  V out[NO], step, delta1[H1];                                 // out: x(t)'s outputs, the step, layer 1's error
 };
 
 // Forward x(t) and x(t-1) through layers 2-3 and the TS update of layers 2-3 (`learner.ts_step`), in lanes.
-inline void lanes_step(const float* c, Group& g, Lanes& a) {
-  v8 h1p[H1];
+template <int W>
+inline void lanes_step(const float* c, Group<W>& g, Lanes<W>& a) {
+  using V = vf<W>;
+  using I = vi<W>;
+  V h1p[H1];
   for (int j = 0; j < H1; ++j) h1p[j] = a.g1p[j] - 0.5f;
-  v8 sn[H2], sp[H2];
-  for (int k = 0; k < H2; ++k) sn[k] = sp[k] = splat(0.0f);
+  V sn[H2], sp[H2];
+  for (int k = 0; k < H2; ++k) sn[k] = sp[k] = splat<W>(0.0f);
   for (int j = 0; j < H1; ++j)
     for (int k = 0; k < H2; ++k) {
       sn[k] = sn[k] + a.h1n[j] * g.w2[j][k];
       sp[k] = sp[k] + h1p[j] * g.w2[j][k];
     }
-  v8 h2n[H2], g2p[H2], h2p[H2];
+  V h2n[H2], g2p[H2], h2p[H2];
   for (int k = 0; k < H2; ++k) {
-    h2n[k] = vsigmoid(sn[k] + g.b2[k]) - 0.5f;
-    g2p[k] = vsigmoid(sp[k] + g.b2[k]);
+    h2n[k] = vsigmoid<W>(sn[k] + g.b2[k]) - 0.5f;
+    g2p[k] = vsigmoid<W>(sp[k] + g.b2[k]);
     h2p[k] = g2p[k] - 0.5f;
   }
-  v8 tn[NO], tp[NO], gop[NO], op[NO];
-  for (int k = 0; k < NO; ++k) tn[k] = tp[k] = splat(0.0f);
+  V tn[NO], tp[NO], gop[NO], op[NO];
+  for (int k = 0; k < NO; ++k) tn[k] = tp[k] = splat<W>(0.0f);
   for (int j = 0; j < H2; ++j)
     for (int k = 0; k < NO; ++k) {
       tn[k] = tn[k] + h2n[j] * g.w3[j][k];
       tp[k] = tp[k] + h2p[j] * g.w3[j][k];
     }
   for (int k = 0; k < NO; ++k) {
-    a.out[k] = vsigmoid(tn[k] + g.b3[k]) - 0.5f;
-    gop[k] = vsigmoid(tp[k] + g.b3[k]);
+    a.out[k] = vsigmoid<W>(tn[k] + g.b3[k]) - 0.5f;
+    gop[k] = vsigmoid<W>(tp[k] + g.b3[k]);
     op[k] = gop[k] - 0.5f;
   }
   // ts_targets.
-  const i8 valid = a.valid != 0.0f, terminal = a.terminal != 0.0f;
-  const v8 p_next = sel(terminal, a.reward, a.out[0]);
-  const v8 step_cost = c[C_P_RANGE] / a.nmax;
-  v8 critic = p_next - step_cost;
-  critic = sel(terminal, critic, vmax(critic, splat(c[C_CRITIC_FLOOR])));
-  v8 target[NO];
+  const I valid = a.valid != 0.0f, terminal = a.terminal != 0.0f;
+  const V p_next = sel<W>(terminal, a.reward, a.out[0]);
+  const V step_cost = c[C_P_RANGE] / a.nmax;
+  V critic = p_next - step_cost;
+  critic = sel<W>(terminal, critic, vmax<W>(critic, splat<W>(c[C_CRITIC_FLOOR])));
+  V target[NO];
   target[0] = critic;
   for (int i = 0; i < 2; ++i) {
-    v8 t = a.pout[1 + i] + a.prnd[i] * a.pgain * ((p_next - a.pout[0]) - a.baseline * step_cost);
-    target[1 + i] = sel(a.bound > 0.0f, vmin(vmax(t, -a.bound), a.bound), t);
+    V t = a.pout[1 + i] + a.prnd[i] * a.pgain * ((p_next - a.pout[0]) - a.baseline * step_cost);
+    target[1 + i] = sel<W>(a.bound > 0.0f, vmin<W>(vmax<W>(t, -a.bound), a.bound), t);
   }
-  v8 delta3[NO], scaled[NO];
-  a.step = sel(valid, a.lr, splat(0.0f));
+  V delta3[NO], scaled[NO];
+  a.step = sel<W>(valid, a.lr, splat<W>(0.0f));
   for (int k = 0; k < NO; ++k) {
-    v8 err = sel(valid, target[k] - op[k], splat(0.0f));
-    delta3[k] = -err * vslope(gop[k]);
+    V err = sel<W>(valid, target[k] - op[k], splat<W>(0.0f));
+    delta3[k] = -err * vslope<W>(gop[k]);
     scaled[k] = a.step * delta3[k];
   }
   // Backprop through the old weights, each layer's SGD step as the signal passes it.
-  v8 delta2[H2], scaled2[H2];
+  V delta2[H2], scaled2[H2];
   for (int j = 0; j < H2; ++j) {
-    v8 sum = splat(0.0f);
+    V sum = splat<W>(0.0f);
     for (int k = 0; k < NO; ++k) sum = sum + g.w3[j][k] * delta3[k];
-    delta2[j] = sum * vslope(g2p[j]);
+    delta2[j] = sum * vslope<W>(g2p[j]);
     for (int k = 0; k < NO; ++k) g.w3[j][k] = g.w3[j][k] - h2p[j] * scaled[k];
   }
   for (int k = 0; k < NO; ++k) g.b3[k] = g.b3[k] - scaled[k];
   for (int k = 0; k < H2; ++k) scaled2[k] = a.step * delta2[k];
   for (int j = 0; j < H1; ++j) {
-    v8 sum = splat(0.0f);
+    V sum = splat<W>(0.0f);
     for (int k = 0; k < H2; ++k) sum = sum + g.w2[j][k] * delta2[k];
-    a.delta1[j] = sum * vslope(a.g1p[j]);
+    a.delta1[j] = sum * vslope<W>(a.g1p[j]);
     for (int k = 0; k < H2; ++k) g.w2[j][k] = g.w2[j][k] - h1p[j] * scaled2[k];
   }
   for (int k = 0; k < H2; ++k) g.b2[k] = g.b2[k] - scaled2[k];
@@ -388,15 +404,16 @@ struct Rows {
 
 // Layer 1 of one learner, units along the vector lanes: its pre-activation u1 of x(t) (over the visual rows, then
 // the coded rows in order, as `learner._layer1_input_product`), into lane `l` of `a` with the pending step.
+template <int W>
 inline void layer1_in(const float* f, const int* is, const float* hy, const float* x, const int* rows, float* u1,
-                      Rows& nz, Lanes& a, int l) {
-  static_assert(H1 % LANES == 0, "the first hidden layer is padded to whole vectors");
-  constexpr int NV = H1 / LANES;
+                      Rows& nz, Lanes<W>& a, int l) {
+  static_assert(H1 % 8 == 0, "the first hidden layer is padded to whole vectors of 8");
+  constexpr int NV = H1 / 8;
   const float* w1 = f + F_W1;
   v8 acc[NV];
-  for (int v = 0; v < NV; ++v) acc[v] = splat(0.0f);
+  for (int v = 0; v < NV; ++v) acc[v] = splat<8>(0.0f);
   auto add_row = [&](int i) {
-    for (int v = 0; v < NV; ++v) acc[v] = acc[v] + x[i] * load(w1 + i * H1 + v * LANES);
+    for (int v = 0; v < NV; ++v) acc[v] = acc[v] + x[i] * load(w1 + i * H1 + v * 8);
   };
   // A row whose input is 0 adds +0 to a sum that is never -0: it is skipped, and so are most of them.
   nz.n = 0;
@@ -406,14 +423,14 @@ inline void layer1_in(const float* f, const int* is, const float* hy, const floa
     if (x[rows[k]] != 0.0f) nz.at[nz.n++] = rows[k];
   for (int r = 0; r < nz.n; ++r) add_row(nz.at[r]);
   for (int v = 0; v < NV; ++v) {
-    acc[v] = acc[v] + load(f + F_B1 + v * LANES);
-    const v8 h1n = vsigmoid(acc[v]) - 0.5f, g1p = vsigmoid(load(f + F_PU1 + v * LANES));
-    for (int m = 0; m < LANES; ++m) {
-      a.h1n[v * LANES + m][l] = h1n[m];
-      a.g1p[v * LANES + m][l] = g1p[m];
+    acc[v] = acc[v] + load(f + F_B1 + v * 8);
+    const v8 h1n = vsigmoid<8>(acc[v]) - 0.5f, g1p = vsigmoid<8>(load(f + F_PU1 + v * 8));
+    for (int m = 0; m < 8; ++m) {
+      a.h1n[v * 8 + m][l] = h1n[m];
+      a.g1p[v * 8 + m][l] = g1p[m];
     }
   }
-  for (int v = 0; v < NV; ++v) store(u1 + v * LANES, acc[v]);
+  for (int v = 0; v < NV; ++v) store(u1 + v * 8, acc[v]);
   a.valid[l] = static_cast<float>(is[I_PVALID] != 0);
   a.terminal[l] = static_cast<float>(is[I_PTERM] != 0);
   a.reward[l] = f[F_PREW];
@@ -428,7 +445,8 @@ inline void layer1_in(const float* f, const int* is, const float* hy, const floa
 }
 
 // A lane with no learner, or a frozen one: finite values and a zero step, so that its weights stay as they are.
-inline void idle_lane(Lanes& a, int l) {
+template <int W>
+inline void idle_lane(Lanes<W>& a, int l) {
   for (int j = 0; j < H1; ++j) {
     a.h1n[j][l] = 0.0f;
     a.g1p[j][l] = 0.5f;
@@ -440,7 +458,8 @@ inline void idle_lane(Lanes& a, int l) {
 }
 
 // Layer 1's SGD step of one learner on x(t-1) = its pending x, and the next Pending.u1 (`learner.ts_step`).
-inline void layer1_out(float* f, const float* x, const Rows& nz, const Rows& pnz, const float* u1, const Lanes& a,
+template <int W>
+inline void layer1_out(float* f, const float* x, const Rows& nz, const Rows& pnz, const float* u1, const Lanes<W>& a,
                        int l, const float* c, float* u1_next) {
   float* w1 = f + F_W1;
   const float* px = f + F_PX;
@@ -651,19 +670,17 @@ inline void act_and_step(const float* c, float* f, int* is, const float* u, cons
   }
 }
 
-}  // namespace
-
-// Steps `n_steps` steps of `n_learners` learners in place. u: (n_steps, n_learners, NU) draws, step-major as the
-// chunk draws them; pf / pi: each learner's plan (conditions, catch probabilities / ends, conditions, learning).
-extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* istate, const float* hyper,
-                                 const float* pf, const int32_t* pi, const float* u, int64_t n_learners,
-                                 int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
+// The kernel's loop over steps and groups of W learners (`reach_native_run`).
+template <int W>
+void run(const float* consts, float* fstate, int32_t* istate, const float* hyper, const float* pf, const int32_t* pi,
+         const float* u, int64_t n_learners, int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
+  constexpr int LANES = W;
   const int64_t npf = ncond * (NFIELD + NIN) + nb, npi = 4 * nb, n_groups = (n_learners + LANES - 1) / LANES;
-  Group* groups = new Group[n_groups]();
+  Group<W>* groups = new Group<W>[n_groups]();
   // Layers 2 and 3 into lanes for the call, and back at its end.
   auto lanes = [&](bool in) {
     for (int64_t l = 0; l < n_learners; ++l) {
-      Group& g = groups[l / LANES];
+      Group<W>& g = groups[l / LANES];
       float* f = fstate + l * NF;
       const int m = l % LANES;
       for (int j = 0; j < H1; ++j)
@@ -682,7 +699,7 @@ extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* is
       if (fstate[l * NF + F_PX + i] != 0.0f) pending[l].at[pending[l].n++] = i;
   }
   Rows nz[LANES];
-  Lanes a;
+  Lanes<W> a;
   float x[LANES][NIN], u1[LANES][H1], u1_next[H1], out[NO];
   int rows[LANES][2 * NCODE];
   bool active[LANES];
@@ -692,18 +709,18 @@ extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* is
         const int64_t l = g * LANES + m;
         active[m] = l < n_learners && istate[l * NI + I_TRIALS] < budget;  // frozen: budgeted_step keeps it all
         if (!active[m]) {
-          idle_lane(a, m);
+          idle_lane<W>(a, m);
           continue;
         }
         observe(consts, fstate + l * NF, x[m], rows[m]);
-        layer1_in(fstate + l * NF, istate + l * NI, hyper + l * NH, x[m], rows[m], u1[m], nz[m], a, m);
+        layer1_in<W>(fstate + l * NF, istate + l * NI, hyper + l * NH, x[m], rows[m], u1[m], nz[m], a, m);
       }
-      lanes_step(consts, groups[g], a);
+      lanes_step<W>(consts, groups[g], a);
       for (int m = 0; m < LANES; ++m) {
         if (!active[m]) continue;
         const int64_t l = g * LANES + m;
         float* f = fstate + l * NF;
-        layer1_out(f, x[m], nz[m], pending[l], u1[m], a, m, consts, u1_next);
+        layer1_out<W>(f, x[m], nz[m], pending[l], u1[m], a, m, consts, u1_next);
         pending[l] = nz[m];
         for (int k = 0; k < NO; ++k) out[k] = a.out[k][m];
         act_and_step(consts, f, istate + l * NI, u + (s * n_learners + l) * NU, hyper + l * NH, pf + l * npf,
@@ -713,6 +730,19 @@ extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* is
   lanes(false);
   delete[] groups;
   delete[] pending;
+}
+
+}  // namespace
+
+// Steps `n_steps` steps of `n_learners` learners in place. u: (n_steps, n_learners, NU) draws, step-major as the
+// chunk draws them; pf / pi: each learner's plan (conditions, catch probabilities / ends, conditions, learning).
+// Eight learners share the vector lanes of layers 2-3 (AVX), or four (SSE) when fewer: one lane a learner alone was
+// slower than four lanes, three of them idle.
+extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* istate, const float* hyper,
+                                 const float* pf, const int32_t* pi, const float* u, int64_t n_learners,
+                                 int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
+  auto go = n_learners >= 8 ? run<8> : run<4>;
+  go(consts, fstate, istate, hyper, pf, pi, u, n_learners, n_steps, nb, ncond, budget);
 }
 
 extern "C" int reach_native_sizes(int64_t* out) {
