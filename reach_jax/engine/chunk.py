@@ -137,7 +137,8 @@ def native_chunk_body(cfg: Config, n_steps: int, speed: Speed):
     """Uncompiled chunk of one device on the native kernel: (states, plans, hypers, budget) -> (states, None).
 
     The same function as `chunk_body` without a per-trial log, bit for bit (`native.unsupported` says which learners
-    it covers). Stats are reset at its start.
+    it covers). One kernel call runs every step, its random draws included (the stream of `random_stream`). Stats are
+    reset at its start.
     """
     name = native.target(cfg, speed)
     consts = native.layout.consts_vector(cfg)
@@ -148,29 +149,15 @@ def native_chunk_body(cfg: Config, n_steps: int, speed: Speed):
         wide = widen_hidden(states, speed.hidden_pad)
         f, i = native.layout.pack_state(wide)
         pf, pi, n_blocks, n_cond = native.layout.pack_plan(plans)
-        hy = native.layout.pack_hyper(hypers)
-        keys = states.key
         call = jax.ffi.ffi_call(
             name,
             (jax.ShapeDtypeStruct(f.shape, jnp.float32), jax.ShapeDtypeStruct(i.shape, jnp.int32)),
             input_output_aliases={1: 0, 2: 1},
         )
-        step_col = len(native.layout.INT_FIELDS) - 1
-
-        def run_block(carry, n: int):
-            f, i = carry
-            u = jax.vmap(lambda k, first: random_stream.step_uniforms(k, first, n, cfg))(keys, i[:, step_col])
-            u = jnp.swapaxes(u, 0, 1)
-            return call(jnp.asarray(consts), f, i, hy, pf, pi, u, jnp.reshape(budget, (1,)).astype(jnp.int32),
-                        nb=np.int64(n_blocks), ncond=np.int64(n_cond))  # fmt: skip
-
-        block = block_size(n_steps, native.BLOCK)
-        n_full, rest = divmod(n_steps, block)
-        carry = jax.lax.scan(lambda c, _: (run_block(c, block), None), (f, i), None, length=n_full)[0]
-        if rest:
-            carry = run_block(carry, rest)
-        out = native.layout.unpack_state(*carry, wide)
-        return narrow_hidden(out, cfg), None
+        hy, budget = native.layout.pack_hyper(hypers), jnp.reshape(budget, (1,)).astype(jnp.int32)
+        attrs = {"n_steps": np.int64(n_steps), "nb": np.int64(n_blocks), "ncond": np.int64(n_cond)}
+        f, i = call(jnp.asarray(consts), f, i, hy, pf, pi, states.key, budget, **attrs)
+        return narrow_hidden(native.layout.unpack_state(f, i, wide), cfg), None
 
     return chunk
 

@@ -1,9 +1,9 @@
 """The native CPU engine: the training step loop as one C++ kernel (`kernel.cc`) over every learner of a device, called
 from the compiled chunk through XLA's FFI, bit-identical to the JAX step under "cpu-exact" (docs/performance.md).
 
-Counts are steps or trials. Its chunk (`chunk.native_chunk_body`) draws each block's uniforms in JAX, packs the
-learners into rows (`layout`) and calls the kernel once a block; sharding, checkpoints and the Python API are those
-of the JAX engine. `build` compiles the kernel on first use.
+Counts are steps or trials. Its chunk (`chunk.native_chunk_body`) packs the learners into rows (`layout`) and calls
+the kernel once, which runs every step and makes the random draws of `random_stream` itself; sharding, checkpoints
+and the Python API are those of the JAX engine. `build` compiles the kernel on first use.
 """
 
 from __future__ import annotations
@@ -17,9 +17,7 @@ from reach_jax.config.schema import Speed
 from reach_jax.engine import xla_options
 from reach_jax.engine.native import build, layout
 
-BLOCK = 512  # steps a kernel call: their draws are drawn in one vectorised call before it
-
-__all__ = ["BLOCK", "build", "layout", "resolve", "target", "unsupported"]
+__all__ = ["build", "layout", "resolve", "target", "unsupported"]
 
 
 def unsupported(cfg: Config, speed: Speed) -> str | None:

@@ -90,5 +90,5 @@ def load(header: str) -> tuple[ctypes.CDLL, str]:
             os.replace(built, lib)  # atomic: concurrent first uses each build and one wins
     handle = ctypes.CDLL(str(lib))
     target = f"reach_native_{key[:16]}"
-    jax.ffi.register_ffi_target(target, jax.ffi.pycapsule(handle.ReachNativeBlock), platform="cpu")
+    jax.ffi.register_ffi_target(target, jax.ffi.pycapsule(handle.ReachNativeChunk), platform="cpu")
     return handle, target

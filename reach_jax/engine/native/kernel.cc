@@ -485,21 +485,47 @@ inline void layer1_out(float* f, const float* x, const Rows& nz, const Rows& pnz
   for (int j = 0; j < H1; ++j) u1_next[j] = u1[j] - step * delta1[j] * factor;
 }
 
+// A step's uniform draws in [0, 1) (`random_stream.step_uniforms`): jax.random.uniform(fold_in(key, step), (NU,))
+// under threefry2x32 with partitionable bits, drawn one at a time as the step needs them, the same bits as JAX's.
+inline uint32_t rotl(uint32_t x, int r) { return (x << r) | (x >> (32 - r)); }
+
+inline void threefry(uint32_t k0, uint32_t k1, uint32_t& x0, uint32_t& x1) {
+  static const int rot[2][4] = {{13, 15, 26, 6}, {17, 29, 16, 24}};
+  const uint32_t ks[3] = {k0, k1, k0 ^ k1 ^ 0x1BD11BDAu};
+  x0 += ks[0];
+  x1 += ks[1];
+  for (int i = 0; i < 5; ++i) {
+    for (int r : rot[i % 2]) {
+      x0 += x1;
+      x1 = rotl(x1, r) ^ x0;
+    }
+    x0 += ks[(i + 1) % 3];
+    x1 += ks[(i + 2) % 3] + static_cast<uint32_t>(i + 1);
+  }
+}
+
+struct Draws {
+  uint32_t k0, k1;  // fold_in(key, step)
+  Draws(const uint32_t* key, int32_t step) : k0(0), k1(static_cast<uint32_t>(step)) { threefry(key[0], key[1], k0, k1); }
+  float at(int j) const {  // the j-th of the step's uniforms
+    uint32_t b0 = 0, b1 = static_cast<uint32_t>(j);
+    threefry(k0, k1, b0, b1);
+    return bits(((b0 ^ b1) >> 9) | 0x3F800000u) - 1.0f;
+  }
+};
+
 inline bool touching(const float* c, const float* a, const float* b) {
   return std::fabs(a[0] - b[0]) < c[C_GHW] && std::fabs(a[1] - b[1]) < c[C_GHW];
 }
 
 // env.next_trial into the learner's state: condition and block from its plan, placement by the curriculum.
-inline void next_trial(const float* c, float* f, int* is, const float* u, const float* pf, const int* pi, int nb,
+inline void next_trial(const float* c, float* f, int* is, const Draws& u, const float* pf, const int* pi, int nb,
                        int ncond) {
   const int trials = is[I_TRIALS];
   int count = 0;
   for (int b = 0; b < nb; ++b) count += trials >= pi[b];
   const int block = count < nb - 1 ? count : nb - 1;
-  const float* draws_start = u + 2;
-  const float* draws_tgt = u + 4;
-  const float* draws_force = u + 4 + 2 * K;
-  const float catch_draw = u[6 + 2 * K];
+  const float catch_draw = u.at(6 + 2 * K);
   const bool is_catch = catch_draw < pf[ncond * (NFIELD + NIN) + block];
   const int index = is_catch ? pi[2 * nb + block] : pi[nb + block];
   std::memcpy(f + F_FIELD, pf + index * (NFIELD + NIN), sizeof(float) * (NFIELD + NIN));
@@ -510,15 +536,15 @@ inline void next_trial(const float* c, float* f, int* is, const float* u, const 
   const float d = f[F_DIST];
   float start[2], box_lo[2], box_hi[2];
   for (int a = 0; a < 2; ++a) {
-    start[a] = c[C_FLO + a] + draws_start[a] * c[C_FSPAN + a];
+    start[a] = c[C_FLO + a] + u.at(2 + a) * c[C_FSPAN + a];
     box_lo[a] = xmax(c[C_FLO + a], start[a] - d);
     box_hi[a] = xmin(c[C_FHI + a], start[a] + d);
   }
   int first = K - 1;
   float cand[2];
   for (int k = 0; k < K; ++k) {
-    float ck[2] = {box_lo[0] + draws_tgt[2 * k] * (box_hi[0] - box_lo[0]),
-                   box_lo[1] + draws_tgt[2 * k + 1] * (box_hi[1] - box_lo[1])};
+    float ck[2] = {box_lo[0] + u.at(4 + 2 * k) * (box_hi[0] - box_lo[0]),
+                   box_lo[1] + u.at(5 + 2 * k) * (box_hi[1] - box_lo[1])};
     if (!touching(c, start, ck)) {
       first = k;
       cand[0] = ck[0];
@@ -546,14 +572,14 @@ inline void next_trial(const float* c, float* f, int* is, const float* u, const 
   f[F_PTAU + 1] = 0.0f;
   f[F_TGT] = cand[0];
   f[F_TGT + 1] = cand[1];
-  for (int a = 0; a < 2; ++a) f[F_FORCE + a] = f[F_FIELD + FD_RND + a] * (2.0f * draws_force[a] - 1.0f);
+  for (int a = 0; a < 2; ++a) f[F_FORCE + a] = f[F_FIELD + FD_RND + a] * (2.0f * u.at(4 + 2 * K + a) - 1.0f);
   is[I_T] = 0;
   is[I_DRIFTED] = 0;
 }
 
 // The rest of rollout.budgeted_step of one active learner, in place, after its network's TS step: exploration, the
 // environment's step, the counters and the pending step. x: x(t); out: its outputs; u1_next: the next Pending.u1.
-inline void act_and_step(const float* c, float* f, int* is, const float* u, const float* hy, const float* pf,
+inline void act_and_step(const float* c, float* f, int* is, const Draws& u, const float* hy, const float* pf,
                          const int* pi, int nb, int ncond, const float* x, const float* out, const float* u1_next) {
   // exploration.value_scale, noise, actor_gain.
   const int full_at = is[I_FULLAT], trials = is[I_TRIALS], t = is[I_T];
@@ -577,7 +603,7 @@ inline void act_and_step(const float* c, float* f, int* is, const float* u, cons
   float carried[2], fresh[2], tau[2], rnd[2];
   for (int i = 0; i < 2; ++i) {
     carried[i] = (silent ? 0.0f : corr) * f[F_PRND + i];
-    fresh[i] = root * (2.0f * u[i] - 1.0f);
+    fresh[i] = root * (2.0f * u.at(i) - 1.0f);
     rnd[i] = carried[i] + fresh[i];
     const float tm = c[C_TAU_MAX + i];
     tau[i] = clip(c[C_TWO_TAU + i] * ((out[1 + i] + carried[i]) + fresh[i]), -tm, tm);
@@ -673,7 +699,7 @@ inline void act_and_step(const float* c, float* f, int* is, const float* u, cons
 // The kernel's loop over steps and groups of W learners (`reach_native_run`).
 template <int W>
 void run(const float* consts, float* fstate, int32_t* istate, const float* hyper, const float* pf, const int32_t* pi,
-         const float* u, int64_t n_learners, int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
+         const uint32_t* keys, int64_t n_learners, int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
   constexpr int LANES = W;
   const int64_t npf = ncond * (NFIELD + NIN) + nb, npi = 4 * nb, n_groups = (n_learners + LANES - 1) / LANES;
   Group<W>* groups = new Group<W>[n_groups]();
@@ -723,7 +749,7 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
         layer1_out<W>(f, x[m], nz[m], pending[l], u1[m], a, m, consts, u1_next);
         pending[l] = nz[m];
         for (int k = 0; k < NO; ++k) out[k] = a.out[k][m];
-        act_and_step(consts, f, istate + l * NI, u + (s * n_learners + l) * NU, hyper + l * NH, pf + l * npf,
+        act_and_step(consts, f, istate + l * NI, Draws(keys + 2 * l, istate[l * NI + I_STEPS]), hyper + l * NH, pf + l * npf,
                      pi + l * npi, static_cast<int>(nb), static_cast<int>(ncond), x[m], out, u1_next);
       }
     }
@@ -734,15 +760,16 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
 
 }  // namespace
 
-// Steps `n_steps` steps of `n_learners` learners in place. u: (n_steps, n_learners, NU) draws, step-major as the
-// chunk draws them; pf / pi: each learner's plan (conditions, catch probabilities / ends, conditions, learning).
+// Steps `n_steps` steps of `n_learners` learners in place. keys: (n_learners, 2) the learners' threefry keys, whose
+// draws the kernel makes itself; pf / pi: each learner's plan (conditions, catch probabilities / ends, conditions,
+// learning).
 // Eight learners share the vector lanes of layers 2-3 (AVX), or four (SSE) when fewer: one lane a learner alone was
 // slower than four lanes, three of them idle.
 extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* istate, const float* hyper,
-                                 const float* pf, const int32_t* pi, const float* u, int64_t n_learners,
+                                 const float* pf, const int32_t* pi, const uint32_t* keys, int64_t n_learners,
                                  int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
   auto go = n_learners >= 8 ? run<8> : run<4>;
-  go(consts, fstate, istate, hyper, pf, pi, u, n_learners, n_steps, nb, ncond, budget);
+  go(consts, fstate, istate, hyper, pf, pi, keys, n_learners, n_steps, nb, ncond, budget);
 }
 
 extern "C" int reach_native_sizes(int64_t* out) {
@@ -755,22 +782,21 @@ extern "C" int reach_native_sizes(int64_t* out) {
 #ifndef REACH_NO_FFI
 namespace ffi = xla::ffi;
 
-static ffi::Error RunBlock(ffi::Buffer<ffi::F32> consts, ffi::Buffer<ffi::F32> fstate, ffi::Buffer<ffi::S32> istate,
+static ffi::Error RunChunk(ffi::Buffer<ffi::F32> consts, ffi::Buffer<ffi::F32> fstate, ffi::Buffer<ffi::S32> istate,
                            ffi::Buffer<ffi::F32> hyper, ffi::Buffer<ffi::F32> pf, ffi::Buffer<ffi::S32> pi,
-                           ffi::Buffer<ffi::F32> u, ffi::Buffer<ffi::S32> budget, ffi::ResultBuffer<ffi::F32> fout,
-                           ffi::ResultBuffer<ffi::S32> iout, int64_t nb, int64_t ncond) {
-  const auto dims = u.dimensions();  // (n_steps, n_learners, NU)
-  const int64_t n_steps = dims[0], n_learners = dims[1];
+                           ffi::Buffer<ffi::U32> keys, ffi::Buffer<ffi::S32> budget, ffi::ResultBuffer<ffi::F32> fout,
+                           ffi::ResultBuffer<ffi::S32> iout, int64_t n_steps, int64_t nb, int64_t ncond) {
+  const int64_t n_learners = keys.dimensions()[0];
   if (fout->typed_data() != fstate.typed_data())
     std::memcpy(fout->typed_data(), fstate.typed_data(), sizeof(float) * n_learners * NF);
   if (iout->typed_data() != istate.typed_data())
     std::memcpy(iout->typed_data(), istate.typed_data(), sizeof(int32_t) * n_learners * NI);
   reach_native_run(consts.typed_data(), fout->typed_data(), iout->typed_data(), hyper.typed_data(), pf.typed_data(),
-                   pi.typed_data(), u.typed_data(), n_learners, n_steps, nb, ncond, budget.typed_data()[0]);
+                   pi.typed_data(), keys.typed_data(), n_learners, n_steps, nb, ncond, budget.typed_data()[0]);
   return ffi::Error::Success();
 }
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeBlock, RunBlock,
+XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeChunk, RunChunk,
                               ffi::Ffi::Bind()
                                   .Arg<ffi::Buffer<ffi::F32>>()
                                   .Arg<ffi::Buffer<ffi::F32>>()
@@ -778,10 +804,11 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeBlock, RunBlock,
                                   .Arg<ffi::Buffer<ffi::F32>>()
                                   .Arg<ffi::Buffer<ffi::F32>>()
                                   .Arg<ffi::Buffer<ffi::S32>>()
-                                  .Arg<ffi::Buffer<ffi::F32>>()
+                                  .Arg<ffi::Buffer<ffi::U32>>()
                                   .Arg<ffi::Buffer<ffi::S32>>()
                                   .Ret<ffi::Buffer<ffi::F32>>()
                                   .Ret<ffi::Buffer<ffi::S32>>()
+                                  .Attr<int64_t>("n_steps")
                                   .Attr<int64_t>("nb")
                                   .Attr<int64_t>("ncond"));
 #endif
