@@ -14,7 +14,7 @@ import pytest
 from reach_jax import env
 from reach_jax.config import Config, from_partial
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
-from reach_jax.engine import batch, native
+from reach_jax.engine import batch, native, random_stream
 from reach_jax.engine.chunk import make_chunk, widen_hidden
 from reach_jax.engine.native import build, layout
 from reach_jax.physics import arm, fields
@@ -30,6 +30,7 @@ def library(cfg: Config) -> ctypes.CDLL:
     lib = build.load(layout.header(cfg, DEFAULT_SPEED.hidden_pad))[0]
     lib.reach_native_observe.argtypes = [ctypes.c_void_p] * 4
     lib.reach_native_arm_step.argtypes = [ctypes.c_void_p] * 6
+    lib.reach_native_draws.argtypes = [ctypes.c_void_p, ctypes.c_int32, ctypes.c_void_p]
     return lib
 
 
@@ -87,6 +88,18 @@ def test_the_kernels_arm_step_equals_the_jax_one():
         args = (consts, np.ascontiguousarray(s[i]), np.ascontiguousarray(tau[i]), f, np.ascontiguousarray(force[i]))
         lib.reach_native_arm_step(*(ptr(a) for a in args), ptr(out))
         assert out.tobytes() == want[i].tobytes(), (i, out, want[i])
+
+
+def test_the_kernels_draws_equal_the_random_stream():
+    cfg = Config()
+    lib, keys = library(cfg), batch.init_batch(cfg).states.key
+    for key in np.asarray(keys):
+        first = int(np.random.default_rng(int(key[0])).integers(0, 2**31 - 100))
+        want = np.asarray(random_stream.step_uniforms(jnp.asarray(key), jnp.int32(first), 50, cfg))
+        for s in range(50):
+            got = np.zeros(want.shape[1], np.float32)
+            lib.reach_native_draws(ptr(np.ascontiguousarray(key)), first + s, ptr(got))
+            assert got.tobytes() == want[s].tobytes(), (key, first + s)
 
 
 SWEEP = {  # per-learner hyperparameters that turn on each branch of the step, one learner each

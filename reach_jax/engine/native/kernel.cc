@@ -814,7 +814,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeChunk, RunChunk,
 #endif
 
 // Pieces of the step for the tests, each against its JAX function: the network input of a learner's packed state
-// (x (NIN,), rows (2 NCODE,)), and one arm step.
+// (x (NIN,), rows (2 NCODE,)), one arm step, and a step's draws (NU,).
 extern "C" void reach_native_observe(const float* consts, const float* fstate, float* x, int32_t* rows) {
   int r[2 * NCODE];
   observe(consts, fstate, x, r);
@@ -824,4 +824,9 @@ extern "C" void reach_native_observe(const float* consts, const float* fstate, f
 extern "C" void reach_native_arm_step(const float* consts, const float* s, const float* tau, const float* field,
                                       const float* force, float* out) {
   arm_step(consts, s, tau, field, force, out);
+}
+
+extern "C" void reach_native_draws(const uint32_t* key, int32_t step, float* out) {
+  const Draws u(key, step);
+  for (int j = 0; j < NU; ++j) out[j] = u.at(j);
 }
