@@ -11,6 +11,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax._src.lax import lax as lax_internal
 
 from reach_jax.config import Config, n_inputs
 from reach_jax.config.hyper import NAMES as HYPER_NAMES
@@ -148,7 +149,11 @@ def unpack_state(f: jax.Array, i: jax.Array, like: LearnerState) -> LearnerState
         size = int(np.prod(old.shape[1:], dtype=int))
         part = rows[kind][:, at[kind] : at[kind] + size]
         at[kind] += size
-        return part.reshape(old.shape).astype(old.dtype)
+        # Weakly typed where `like` is (as the JAX chunk returns the pending reward), so that a chunk's states type
+        # as its input did and the next chunk does not compile again; JAX has no public cast that keeps weak type.
+        return lax_internal._convert_element_type(
+            part.reshape(old.shape), np.dtype(old.dtype), weak_type=jax.typeof(old).weak_type
+        )
 
     a, e = like.agent, like.env
     tr, pend, st = e.trial, a.pending, like.counters.stats
