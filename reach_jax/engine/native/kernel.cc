@@ -18,18 +18,23 @@
 
 namespace {
 
-// llvm.maximum / llvm.minimum, which XLA emits for jnp.maximum / jnp.minimum: NaN wins, +0 > -0.
+// llvm.maximum / llvm.minimum, which XLA emits for jnp.maximum / jnp.minimum: NaN wins, +0 > -0. Branch-free: of
+// equal values the bitwise and (or) picks +0 (-0) from a pair of zeros and leaves any other value as it is.
+inline uint32_t ubits(float f) {
+  uint32_t u;
+  std::memcpy(&u, &f, 4);
+  return u;
+}
+inline float bits(uint32_t u);
 inline float xmax(float a, float b) {
-  if (a != a) return a;
-  if (b != b) return b;
-  if (a == b) return std::signbit(a) ? b : a;
-  return a > b ? a : b;
+  float r = a > b ? a : b;
+  r = a == b ? bits(ubits(a) & ubits(b)) : r;
+  return a != a ? a : r;
 }
 inline float xmin(float a, float b) {
-  if (a != a) return a;
-  if (b != b) return b;
-  if (a == b) return std::signbit(a) ? a : b;
-  return a < b ? a : b;
+  float r = a < b ? a : b;
+  r = a == b ? bits(ubits(a) | ubits(b)) : r;
+  return a != a ? a : r;
 }
 inline float clip(float x, float lo, float hi) { return xmin(xmax(x, lo), hi); }  // jnp.clip: max, then min
 
@@ -770,13 +775,6 @@ extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* is
                                  int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
   auto go = n_learners >= 8 ? run<8> : run<4>;
   go(consts, fstate, istate, hyper, pf, pi, keys, n_learners, n_steps, nb, ncond, budget);
-}
-
-extern "C" int reach_native_sizes(int64_t* out) {
-  out[0] = NF;
-  out[1] = NI;
-  out[2] = NH;
-  return 0;
 }
 
 #ifndef REACH_NO_FFI
