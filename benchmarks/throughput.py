@@ -67,6 +67,10 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument("--run", type=Path, default=DEFAULT_RUN, help="training run whose trial lengths to use")
     p.add_argument("--devices", type=int, default=os.cpu_count(), help="CPU host devices (default: one per core)")
     p.add_argument("--compare", type=Path, help="earlier JSON: exit 1 if any batch fell below the floor")
+    p.add_argument(
+        "--engines", nargs="+", choices=("native", "jax"), default=["native", "jax"],
+        help="the step loop's engines to measure, each in turn (default both; the first gives the top-level figures)",
+    )  # fmt: skip
     return p.parse_args(argv)
 
 
@@ -222,40 +226,53 @@ def main(argv=None) -> int:
     import jax
 
     from reach_jax.config import Config
+    from reach_jax.engine import native
 
     started = time.perf_counter()
     cfg = Config()
     every = jax.devices()
     one = every[:1]
-    rows = {}
-    for n in args.batches:
-        rows[n] = {"all": time_chunk(n, every, cfg, args.quick)}
-        sharded = distribute.learner_mesh(n, every).size > 1
-        rows[n]["one"] = time_chunk(n, one, cfg, args.quick) if sharded else rows[n]["all"]
-        print(f"measured {n} learners", file=sys.stderr, flush=True)
+    engines = [e for e in args.engines if native.resolve(cfg, Speed(engine=e))[0].engine == e]
+    by_engine = {}
+    for engine in engines:
+        speed, rows = dataclasses.replace(DEFAULT_SPEED, engine=engine), {}
+        for n in args.batches:
+            rows[n] = {"all": time_chunk(n, every, cfg, args.quick, speed=speed)}
+            sharded = distribute.learner_mesh(n, every).size > 1
+            rows[n]["one"] = time_chunk(n, one, cfg, args.quick, speed=speed) if sharded else rows[n]["all"]
+            print(f"measured {n} learners on the {engine} engine", file=sys.stderr, flush=True)
+        by_engine[engine] = rows
+    rows = by_engine[engines[0]]
     ref = time_reference(cfg, args.quick)
     needed, how = schedule_steps(args.run)
     table2 = table2_figures(rows, needed)
 
     print(f"jax {jax.__version__}, {jax.default_backend()}, {len(every)} devices, {os.cpu_count()} cores")
     header = ("learners", "latency 1 dev", f"latency {len(every)} dev", "1 device", f"{len(every)} devices")
-    print("{:>8} {:>14} {:>14} {:>14} {:>14} {:>9} {:>8}".format(*header, "vs NumPy", "compile"))
-    for n, r in rows.items():
-        a, o = r["all"], r["one"]
-        print(
-            f"{n:8d} {o['latency_us']:11.2f} us {a['latency_us']:11.2f} us {o['steps_per_s']:14,.0f} "
-            f"{a['steps_per_s']:14,.0f} {a['steps_per_s'] / ref:8.0f}x {a['compile_s']:7.2f}s"
-        )
+    for engine, engine_rows in by_engine.items():
+        print(f"{engine} engine")
+        print("{:>8} {:>14} {:>14} {:>14} {:>14} {:>9} {:>8}".format(*header, "vs NumPy", "compile"))
+        for n, r in engine_rows.items():
+            a, o = r["all"], r["one"]
+            print(
+                f"{n:8d} {o['latency_us']:11.2f} us {a['latency_us']:11.2f} us {o['steps_per_s']:14,.0f} "
+                f"{a['steps_per_s']:14,.0f} {a['steps_per_s'] / ref:8.0f}x {a['compile_s']:7.2f}s"
+            )
     print(f"NumPy reference loop (testing.reference.run_reference): {ref:,.0f} steps/s, {1e6 / ref:.0f} us a step")
     print(how)
     for key, label in (("table2_critical_path_s", "critical path"), ("table2_schedule_s", "schedule")):
         if table2[key] is not None:
             print(f"Table-2 {label} (8 x 2e6 trials): {table2[key]:,.0f} s = {table2[key] / 60:.1f} min")
 
-    def per_batch(which: str, key: str) -> dict:
+    def per_batch(which: str, key: str, rows: dict = rows) -> dict:
         return {str(n): r[which][key] for n, r in rows.items()}
 
+    keys = {"latency_us": ("all", "latency_us"), "latency_us_one_device": ("one", "latency_us"),
+            "learner_steps_per_s": ("all", "steps_per_s"), "learner_steps_per_s_one_device": ("one", "steps_per_s"),
+            "compile_s": ("all", "compile_s")}  # fmt: skip
     result = {
+        "engine": engines[0],
+        "by_engine": {e: {k: per_batch(*w, rows=r) for k, w in keys.items()} for e, r in by_engine.items()},
         "latency_us": per_batch("all", "latency_us"),
         "latency_us_one_device": per_batch("one", "latency_us"),
         "learner_steps_per_s": per_batch("all", "steps_per_s"),

@@ -58,6 +58,7 @@ def test_help_shows_at_most_24_options_in_the_core_and_infrastructure_groups(cap
     core |= {"--set", "--quiet", "--lr", "--noise", "--lam", "--sweep", "--list-hyper"}
     assert set(groups["core"]) == core
     infra = {"--devices", "--chunk-steps", "--keep-every", "--trial-log-every", "--init-from", "--hidden-pad"}
+    infra |= {"--engine"}
     assert set(groups["infrastructure"]) == infra | {"--multihost"}
     assert not groups.get("options") and not groups.get("positional arguments")
     # The research knobs of the recipe search have no flag of their own any more.

@@ -73,7 +73,7 @@ def test_a_learner_rounds_the_same_alone_as_in_a_batch():
     cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, seeds=1))
     group = batch.init_batch(cfg)
     budget = jnp.asarray(2**31 - 1, jnp.int32)
-    chunk = make_chunk(cfg, 600, jax.devices()[:1])
+    chunk = make_chunk(cfg, 600, jax.devices()[:1], speed=dataclasses.replace(DEFAULT_SPEED, engine="jax"))
     together = chunk(jax.tree.map(jnp.copy, group.states), group.plans, group.hypers, budget)[0]
     for i in (0, 3):
         alone = jax.tree.map(lambda a, i=i: a[i : i + 1], group)

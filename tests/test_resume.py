@@ -28,8 +28,8 @@ from reach_jax.config import (
     from_dict,
     to_dict,
 )
-from reach_jax.config.schema import MAX_HIDDEN_PAD, Speed
-from reach_jax.engine import batch, xla_options
+from reach_jax.config.schema import DEFAULT_SPEED, MAX_HIDDEN_PAD, Speed
+from reach_jax.engine import batch, native, xla_options
 from reach_jax.engine.chunk import make_chunk
 from reach_jax.errors import error_line, printable
 from reach_jax.store import checkpoint, run_lock
@@ -142,6 +142,7 @@ def test_a_resume_under_another_sparse_layer1_is_refused_and_an_unstored_one_mea
         assert json.loads(data["__meta__"].tobytes())["speed"] == {
             "sparse_layer1": True,
             "engine": xla_options.engine(),
+            "loop": native.resolve(run_dir_io.read_config(out), DEFAULT_SPEED)[0].engine,
         }
     cfg, dense = run_dir_io.read_config(out), Speed(sparse_layer1=False)
     before = snapshot(out)
@@ -176,6 +177,22 @@ def test_a_run_resumes_only_under_the_engine_that_trained_it(uninterrupted, tmp_
     assert snapshot(out) == before
     edit_meta(older, lambda meta: meta.update(speed={"sparse_layer1": True, "engine": xla_options.engine()}))
     assert_resumes_to(uninterrupted, out)
+
+
+def loop_engine(path: Path) -> str:
+    """The step loop's engine that wrote a checkpoint (`Speed.engine`)."""
+    with np.load(path) as data:
+        return json.loads(data["__meta__"].tobytes())["speed"]["loop"]
+
+
+@pytest.mark.parametrize("engine", ["jax", "native"])
+def test_a_run_resumes_under_either_engine_bit_identically(uninterrupted, tmp_path, engine):
+    # The run trained on the default engine (native where it runs); its last chunk on either ends the same.
+    out, older = older_copy(uninterrupted, tmp_path)
+    assert loop_engine(older) == native.resolve(run_dir_io.read_config(out), DEFAULT_SPEED)[0].engine
+    assert_resumes_to(uninterrupted, out, "--engine", engine)
+    want = engine if native.resolve(run_dir_io.read_config(out), Speed(engine=engine))[1] is None else "jax"
+    assert loop_engine(checkpoint.list_checkpoints(out)[-1]) == want
 
 
 def test_a_resume_reads_its_checkpoint_once_and_builds_no_fresh_batch(uninterrupted, tmp_path, monkeypatch):

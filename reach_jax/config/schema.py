@@ -199,6 +199,7 @@ class Config:
 
 
 # How the compiled loops run: not part of Config, since results do not depend on it (but for sparse_layer1).
+ENGINES = ("auto", "jax", "native")  # Speed.engine's values
 MAX_HIDDEN_PAD = 128  # largest Speed.hidden_pad: a TPU vector row of float32; wider only wastes memory
 
 
@@ -216,8 +217,13 @@ class Speed:
     # Layer 1 and its update over the inputs that can be non-zero (about 1/3 of them), not all 125. Off, the
     # same terms are summed in another order: equal to float32 rounding, not bit for bit.
     sparse_layer1: bool = True
+    # The step loop's engine: "jax" (the compiled JAX step, the reference and the GPU/TPU path), "native" (the C++
+    # kernel of `engine.native`, bit-identical on CPU under "cpu-exact") or "auto" (native where it can run).
+    engine: str = "auto"
 
     def __post_init__(self):
+        if self.engine not in ENGINES:
+            raise ValueError(f"engine: must be one of {', '.join(ENGINES)}")
         for name, top in (("hidden_pad", MAX_HIDDEN_PAD), ("draw_block", None)):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1 or (top is not None and value > top):

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.sharding import PartitionSpec
 
 from reach_jax.agent import network
 from reach_jax.config import Config
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
-from reach_jax.engine import distribute, random_stream, rollout
+from reach_jax.engine import distribute, native, random_stream, rollout
 from reach_jax.engine.learner_state import LearnerState
 from reach_jax.env import trial_log
 
@@ -132,6 +133,35 @@ def chunk_body(cfg: Config, n_steps: int, speed: Speed):
     return chunk
 
 
+def native_chunk_body(cfg: Config, n_steps: int, speed: Speed):
+    """Uncompiled chunk of one device on the native kernel: (states, plans, hypers, budget) -> (states, None).
+
+    The same function as `chunk_body` without a per-trial log, bit for bit (`native.unsupported` says which learners
+    it covers). One kernel call runs every step, its random draws included (the stream of `random_stream`). Stats are
+    reset at its start.
+    """
+    name = native.target(cfg, speed)
+    consts = native.layout.consts_vector(cfg)
+
+    def chunk(states, plans, hypers, budget):
+        counters = states.counters
+        states = states.replace(counters=counters.replace(stats=jax.tree.map(jnp.zeros_like, counters.stats)))
+        wide = widen_hidden(states, speed.hidden_pad)
+        f, i = native.layout.pack_state(wide)
+        pf, pi, n_blocks, n_cond = native.layout.pack_plan(plans)
+        call = jax.ffi.ffi_call(
+            name,
+            (jax.ShapeDtypeStruct(f.shape, jnp.float32), jax.ShapeDtypeStruct(i.shape, jnp.int32)),
+            input_output_aliases={1: 0, 2: 1},
+        )
+        hy, budget = native.layout.pack_hyper(hypers), jnp.reshape(budget, (1,)).astype(jnp.int32)
+        attrs = {"n_steps": np.int64(n_steps), "nb": np.int64(n_blocks), "ncond": np.int64(n_cond)}
+        f, i = call(jnp.asarray(consts), f, i, hy, pf, pi, states.key, budget, **attrs)
+        return narrow_hidden(native.layout.unpack_state(f, i, wide), cfg), None
+
+    return chunk
+
+
 def make_trace(cfg: Config, n_steps: int, speed: Speed = DEFAULT_SPEED):
     """Compiled run of one learner that keeps what every step did: `(state, plan, hyper) -> (state, StepInfo)`.
 
@@ -156,9 +186,12 @@ def make_chunk(cfg: Config, n_steps: int, devices=None, speed: Speed = DEFAULT_S
       cfg: model config.
       n_steps: learner steps per call.
       devices: devices to shard over (default `jax.devices()`); a list of one device turns sharding off.
-      speed: how the loop is compiled; the result does not depend on it.
+      speed: how the loop is compiled and its engine (`native.resolve` decides "auto"); the result does not
+        depend on it.
     """
-    chunk = chunk_body(cfg, n_steps, speed)
+    speed = native.resolve(cfg, speed)[0] if speed.engine == "auto" else speed
+    body = native_chunk_body if speed.engine == "native" else chunk_body
+    chunk = body(cfg, n_steps, speed)
     compiled, donated = {}, (0,) if speed.donate else ()
 
     def run(states, plans, hypers, budget):

@@ -167,7 +167,7 @@ def write_checkpoint(run_dir: Path, chunk: int, learners: batch.Batch, cfg: Conf
     """Save the learner states and hyperparameters after `chunk` chunks, with the config, the speed settings
     that change results and the engine as the run's identity."""
     tree = {"states": learners.states, "hypers": learners.hypers}
-    meta = {"config": to_dict(cfg), "speed": speed_settings(speed, engine)}
+    meta = {"config": to_dict(cfg), "speed": {**speed_settings(speed, engine), "loop": speed.engine}}  # loop: unchecked
     return checkpoint.save(run_dir, chunk, tree, meta, cfg.train.keep_every)
 
 

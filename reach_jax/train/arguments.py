@@ -20,7 +20,7 @@ from reach_jax.config import (
 )
 from reach_jax.config.hyperparameter import Hyperparameter
 from reach_jax.config.overlay import PAPER_HYPER
-from reach_jax.config.schema import DEFAULT_SPEED, MAX_HIDDEN_PAD
+from reach_jax.config.schema import DEFAULT_SPEED, ENGINES, MAX_HIDDEN_PAD
 from reach_jax.engine import distribute
 from reach_jax.errors import (
     Parser,
@@ -28,6 +28,8 @@ from reach_jax.errors import (
     positive_int,
     whole_number,
 )
+
+ENGINE_HELP = "the step loop's engine: native (C++, CPU), jax, or auto (native where it runs); same bits (default auto)"
 
 
 def _hidden_pad(text: str) -> int:
@@ -184,6 +186,7 @@ def _add_infrastructure_arguments(infra) -> None:
         help=f"pad the first hidden layer to a multiple of this inside the compiled loop (speed only, not stored; "
         f"1 = off; default {DEFAULT_SPEED.hidden_pad})",
     )
+    infra.add_argument("--engine", choices=ENGINES, default=DEFAULT_SPEED.engine, help=ENGINE_HELP)
     infra.add_argument(
         "--multihost",
         nargs="?",

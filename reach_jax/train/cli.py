@@ -70,7 +70,7 @@ def parse(argv=None) -> Invocation:
 def validate(args: argparse.Namespace) -> Invocation:
     """Check parsed training arguments against the config and the file system, reading the checkpoint or source
     networks the run starts from (once: `train.run` takes them from the Invocation); writes nothing."""
-    speed = Speed(**({} if args.hidden_pad is None else {"hidden_pad": args.hidden_pad}))
+    speed = Speed(**({} if args.hidden_pad is None else {"hidden_pad": args.hidden_pad}), engine=args.engine)
     if args.resume is not None:
         for flag in ("out", "config"):
             if getattr(args, flag) is not None:

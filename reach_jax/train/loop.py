@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -94,7 +95,10 @@ def chunks(prep: Prepared, group: batch.Batch, devices=None, stop: interrupt.Sto
 
 
 def _sinks(prep: Prepared, group, table, progress: bool, devices, stream) -> list[Sink]:
-    """The writing process's sinks: the metrics, the checkpoints and, with `progress`, the bar (`run`'s Args)."""
+    """The writing process's sinks: the metrics, the checkpoints and, with `progress`, the bar (`run`'s Args); it says
+    the engine's notice first, if there is one (`native.resolve`)."""
+    if prep.notice:
+        print(prep.notice, file=sys.stderr if stream is None else stream, flush=True)
     sinks: list[Sink] = [MetricsSink(prep.run_dir), CheckpointSink(prep, group)]
     if progress:
         n_devices = len(devices if devices is not None else jax.devices())

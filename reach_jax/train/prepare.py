@@ -10,7 +10,7 @@ import jax
 
 from reach_jax.config import Config, TrainConfig
 from reach_jax.config.schema import DEFAULT_SPEED, Speed
-from reach_jax.engine import batch, xla_options
+from reach_jax.engine import batch, native, xla_options
 from reach_jax.store import run_dir as run_dir_io
 
 
@@ -30,6 +30,7 @@ class Prepared(NamedTuple):
     learners: batch.Batch | None  # resuming: the newest checkpoint's learners; else None (fresh ones)
     chunk: int  # chunks already trained
     networks: tuple | None  # train.init_from: the source run's (LearnerState, learner table), `load_networks`
+    notice: str | None = None  # why the native engine is not used, said once at start (`native.resolve`)
 
 
 def prepare(
@@ -43,17 +44,18 @@ def prepare(
     """
     run_dir = default_run_dir(cfg.train) if run_dir is None else Path(run_dir)
     engine = xla_options.engine()
+    speed, notice = native.resolve(cfg, speed)
     if resume:
         # Every process reads it: process 0 writes the next checkpoint only after a gather of every slice.
         learners, chunk = run_dir_io.load_batch(run_dir, cfg, speed=speed, engine=engine)
-        return Prepared(cfg, run_dir, True, speed, engine, learners, chunk, None)
+        return Prepared(cfg, run_dir, True, speed, engine, learners, chunk, None, notice)
     if jax.process_index() == 0 and run_dir_io.holds_run(run_dir):
         raise FileExistsError(f"{run_dir} already holds a run; resume it instead")
     networks = None
     if cfg.train.init_from:
         networks = run_dir_io.load_networks(cfg)
         batch.source_indices(networks[1], cfg)
-    return Prepared(cfg, run_dir, False, speed, engine, None, 0, networks)
+    return Prepared(cfg, run_dir, False, speed, engine, None, 0, networks, notice)
 
 
 def begin(prep: Prepared) -> batch.Batch:
