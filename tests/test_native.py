@@ -28,7 +28,7 @@ pytestmark = pytest.mark.skipif(
 def library(cfg: Config) -> ctypes.CDLL:
     """The kernel's library for cfg, with its test entry points typed."""
     lib = build.load(layout.header(cfg, DEFAULT_SPEED.hidden_pad))[0]
-    lib.reach_native_observe.argtypes = [ctypes.c_void_p] * 4
+    lib.reach_native_observe.argtypes = [ctypes.c_void_p] * 5
     lib.reach_native_arm_step.argtypes = [ctypes.c_void_p] * 6
     lib.reach_native_draws.argtypes = [ctypes.c_void_p, ctypes.c_int32, ctypes.c_void_p]
     return lib
@@ -60,12 +60,13 @@ def test_the_kernels_observation_equals_the_jax_one():
         target=jnp.asarray(rng.uniform([-0.2, 0.25], [0.1, 0.5], (n, 2)), jnp.float32),
     )
     states = states.replace(env=states.env.replace(trial=trial))
-    want = np.asarray(jax.jit(jax.vmap(lambda e: env.observe(e, cfg)))(states.env))
+    want = np.asarray(jax.jit(jax.vmap(lambda e, p: env.observe(e, p.geometry, cfg)))(states.env, group.plans))
     rows = np.asarray(layout.pack_state(widen_hidden(states, DEFAULT_SPEED.hidden_pad))[0])
     consts = layout.consts_vector(cfg)
+    geoms = np.asarray(layout.pack_geometry(group.plans.geometry, cfg.sensor.n_cells))
     for i in range(n):
         x, support, row = np.zeros(want.shape[1], np.float32), np.zeros(20, np.int32), np.ascontiguousarray(rows[i])
-        lib.reach_native_observe(ptr(consts), ptr(row), ptr(x), ptr(support))
+        lib.reach_native_observe(ptr(consts), ptr(np.ascontiguousarray(geoms[i])), ptr(row), ptr(x), ptr(support))
         assert x.tobytes() == want[i].tobytes(), i
         assert set(np.flatnonzero(x[25:]) + 25) <= set(support)
 
@@ -121,7 +122,16 @@ SWEEP = {  # per-learner hyperparameters that turn on each branch of the step, o
 
 
 def learners(kind: str):
-    """(cfg, Batch) of one kind of learner: the paper's conditions, a protocol, a sweep, or arms on the elbow stop."""
+    """(cfg, Batch) of one kind of learner: the paper's conditions, a protocol, a sweep, arms on the elbow stop, or
+    four visual fields (the task's geometry as data)."""
+    if kind == "geometry":  # 4 fields: today's, (0.10, 0.45) m at x0.75, (-0.05, 0.41) m at x1.25, (0.00, 0.37) m
+        fields = {
+            "sensor_dx_grid": [0.0, 0.15, 0.0, 0.05],
+            "sensor_dy_grid": [0.0, 0.08, 0.04, 0.0],
+            "sensor_scale_grid": [1.0, 0.75, 1.25, 1.0],
+        }
+        cfg = from_partial({"train": {"seeds": 1, "zip_grids": True, **fields}})
+        return cfg, batch.init_batch(cfg)
     if kind == "protocol":
         cfg = from_partial({"train": {"trials": 45_000, "seeds": 2, "conditions": [], "protocols": ["adaptation"]}})
         cfg = dataclasses.replace(
@@ -149,7 +159,7 @@ def learners(kind: str):
     return cfg, group
 
 
-@pytest.mark.parametrize("kind", ["conditions", "protocol", "sweep", "elbow_stop"])
+@pytest.mark.parametrize("kind", ["conditions", "protocol", "sweep", "elbow_stop", "geometry"])
 def test_every_kind_of_learner_trains_bit_identically_on_either_engine(kind):
     cfg, group = learners(kind)
     ends = {}

@@ -48,7 +48,7 @@ def empty_pending(n_in: int, n_hidden: int | None = None) -> Pending:
         rnd=jnp.zeros(2),
         valid=jnp.array(False),
         terminal=jnp.array(False),
-        reward=jnp.array(0.0),
+        reward=jnp.zeros((), float),  # strong-typed, as the step (and the native kernel) returns it
         u1=None if n_hidden is None else jnp.zeros(n_hidden),
         gain=jnp.ones(()),  # strong-typed, as the chunk returns it
     )

@@ -13,6 +13,7 @@ import math
 
 from reach_jax.config.schema import ArmConfig, Config, SensorConfig
 
+GEOMETRY_HYPERS = ("sensor_dx", "sensor_dy", "sensor_scale")  # the hyperparameters that place a learner's field
 POINTS_PER_SIDE = 41  # the field is checked on this grid, edges and corners included (1/40 of its side apart)
 
 

@@ -148,7 +148,7 @@ def native_chunk_body(cfg: Config, n_steps: int, speed: Speed):
         states = states.replace(counters=counters.replace(stats=jax.tree.map(jnp.zeros_like, counters.stats)))
         wide = widen_hidden(states, speed.hidden_pad)
         f, i = native.layout.pack_state(wide)
-        pf, pi, n_blocks, n_cond = native.layout.pack_plan(plans)
+        pf, pi, n_blocks, n_cond = native.layout.pack_plan(plans, cfg.sensor.n_cells)
         call = jax.ffi.ffi_call(
             name,
             (jax.ShapeDtypeStruct(f.shape, jnp.float32), jax.ShapeDtypeStruct(i.shape, jnp.int32)),

@@ -146,6 +146,7 @@ def _pending(outcome: env.TrialStatus, cfg: Config, **step) -> learner.Pending:
     """
     goal, out_of_range = outcome.goal, outcome.out_of_range
     reward = jnp.where(goal, cfg.learner.reward_goal, 0.0) + jnp.where(out_of_range, cfg.learner.reward_out, 0.0)
+    reward = jnp.asarray(reward, float)  # strong-typed, as a fresh learner's: a chunk's states type as its input
     return learner.Pending(valid=~outcome.cap, terminal=goal | out_of_range, reward=reward, **step)
 
 

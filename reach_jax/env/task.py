@@ -55,7 +55,7 @@ class Geometry:
 
 def learner_sensor(cfg: Config, values: dict) -> SensorConfig:
     """The sensor of a learner whose hyperparameters are `values` (name -> value, `hyper.Hyper`'s names)."""
-    return workspace.moved_sensor(cfg.sensor, values["sensor_dx"], values["sensor_dy"], values["sensor_scale"])
+    return workspace.moved_sensor(cfg.sensor, *(values[name] for name in workspace.GEOMETRY_HYPERS))
 
 
 def geometry(cfg: Config) -> Geometry:

@@ -14,14 +14,13 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from reach_jax.config import SensorConfig, hyper
+from reach_jax.config import SensorConfig, hyper, workspace
 from reach_jax.engine import batch
 from reach_jax.env import task
 from reach_jax.evaluate import frames
 from reach_jax.store import files
 from reach_jax.store import run_dir as run_dir_io
 
-GEOMETRY_HYPERS = ("sensor_dx", "sensor_dy", "sensor_scale")  # the hyperparameters that place a learner's field
 INDEX = "geometries"  # eval/geometries.json and .md list the visual fields and each one's headline numbers
 
 
@@ -55,11 +54,12 @@ def sub_run(data: run_dir_io.Run, sensor: SensorConfig, picks: list[int]) -> run
         trials["learner"] = np.asarray([index[int(i)] for i in trials["learner"]], dtype=int)
     # The field becomes the config's sensor, and the sweep of fields is gone from its config (the networks' hypers
     # keep their values, which name their recipes).
-    grids = {f"{name}_grid": () for name in GEOMETRY_HYPERS}
+    names = workspace.GEOMETRY_HYPERS
+    grids = {f"{name}_grid": () for name in names}
     cfg = dataclasses.replace(
         data.cfg,
         sensor=sensor,
-        learner=dataclasses.replace(data.cfg.learner, **{n: hyper.BY_NAME[n].neutral for n in GEOMETRY_HYPERS}),
+        learner=dataclasses.replace(data.cfg.learner, **{n: hyper.BY_NAME[n].neutral for n in names}),
         train=dataclasses.replace(data.cfg.train, **grids),
     )
     learners = [data.learners[i] for i in picks]

@@ -87,11 +87,12 @@ enum {
 };
 // The field's packed order (`fields.Field`): viscous (2, 2), stiffness (2, 2), anchor, constant, random.
 enum { FD_B = 0, FD_K = 4, FD_X0 = 8, FD_C = 10, FD_RND = 12 };
-// The hyperparameters' order (`hyper.TABLE`).
+// The order of the hyperparameters the step reads (`layout.STEP_HYPERS`: `hyper.TABLE`'s, without the geometry's).
 enum {
   HY_LR, HY_NOISE, HY_LAM, HY_FINAL, HY_DELAY, HY_ANNEAL, HY_VRATIO, HY_VHI, HY_VLO, HY_VAFTER, HY_VGATE, HY_VSTEPS,
   HY_CORR, HY_BASE, HY_GPOW, HY_GAIN, HY_BOUND, HY_EARLY, HY_DGATE, HY_DTRIALS, HY_NCLEAN, HY_QUIET, NH
 };
+static_assert(NH == NHYPER, "the kernel's hyperparameters are not layout.STEP_HYPERS");
 
 struct Arm {
   float s1, c1, s12, c12, s2, c2;  // sines and cosines of theta1, theta1 + theta2, theta2
@@ -209,14 +210,15 @@ inline void overlap(const float* cell_lo, const float* cell_hi, float lo, float 
   for (int k = 0; k < NCELL; ++k) o[k] = xmax(0.0f, xmin(cell_hi[k], hi) - xmax(cell_lo[k], lo));
 }
 
-// sensor.render, then encoding.encode masked, and the coded support rows: x (NIN,), rows (2 * NCODE,).
-inline void observe(const float* c, const float* f, float* x, int* rows) {
+// sensor.render in the learner's geometry g (`layout.pack_geometry`), then encoding.encode masked, and the coded
+// support rows: x (NIN,), rows (2 * NCODE,).
+inline void observe(const float* c, const float* g, const float* f, float* x, int* rows) {
   const float* arm = f + F_ARM;
   float hand[2];
   hand_pos(c, cosf(arm[0]), sinf(arm[0]), cosf(arm[0] + arm[1]), sinf(arm[0] + arm[1]), hand);
   const float* tgt = f + F_TGT;
-  const float half = c[C_HALF_CELL];
-  const float *xlo = c + C_XE, *ylo = c + C_YE, *xhi = c + C_XE_HI, *yhi = c + C_YE_HI;
+  const float half = g[G_HALF];
+  const float *xlo = g + G_XE, *ylo = g + G_YE, *xhi = g + G_XE_HI, *yhi = g + G_YE_HI;
   float both_lo[2] = {xmax(hand[0], tgt[0]) - half, xmax(hand[1], tgt[1]) - half};
   float both_hi[2] = {xmin(hand[0], tgt[0]) + half, xmin(hand[1], tgt[1]) + half};
   float hx[NCELL], hy[NCELL], tx[NCELL], ty[NCELL], bx[NCELL], by[NCELL];
@@ -229,7 +231,7 @@ inline void observe(const float* c, const float* f, float* x, int* rows) {
   const float* mask = f + F_MASK;
   for (int i = 0; i < NCELL; ++i)
     for (int j = 0; j < NCELL; ++j)
-      x[i * NCELL + j] = ((hy[i] * hx[j] + ty[i] * tx[j]) - by[i] * bx[j]) * c[C_INV_CELL_AREA] * mask[i * NCELL + j];
+      x[i * NCELL + j] = ((hy[i] * hx[j] + ty[i] * tx[j]) - by[i] * bx[j]) * g[G_INV_AREA] * mask[i * NCELL + j];
   const float* parm = f + F_PARM;
   const float* ptau = f + F_PTAU;
   const float signal[NCODE] = {arm[0], arm[1], arm[2], arm[3], parm[0], parm[1], parm[2], parm[3], ptau[0], ptau[1]};
@@ -519,8 +521,8 @@ struct Draws {
   }
 };
 
-inline bool touching(const float* c, const float* a, const float* b) {
-  return std::fabs(a[0] - b[0]) < c[C_GHW] && std::fabs(a[1] - b[1]) < c[C_GHW];
+inline bool touching(const float* g, const float* a, const float* b) {
+  return std::fabs(a[0] - b[0]) < g[G_GHW] && std::fabs(a[1] - b[1]) < g[G_GHW];
 }
 
 // env.next_trial into the learner's state: condition and block from its plan, placement by the curriculum.
@@ -537,20 +539,21 @@ inline void next_trial(const float* c, float* f, int* is, const Draws& u, const 
   is[I_BINDEX] = block;
   is[I_BLEARN] = pi[3 * nb + block];
   is[I_BCATCH] = is_catch;
-  // task.place_trial.
+  // task.place_trial, in the learner's geometry.
+  const float* g = pf + ncond * (NFIELD + NIN) + nb;
   const float d = f[F_DIST];
   float start[2], box_lo[2], box_hi[2];
   for (int a = 0; a < 2; ++a) {
-    start[a] = c[C_FLO + a] + u.at(2 + a) * c[C_FSPAN + a];
-    box_lo[a] = xmax(c[C_FLO + a], start[a] - d);
-    box_hi[a] = xmin(c[C_FHI + a], start[a] + d);
+    start[a] = g[G_LO + a] + u.at(2 + a) * g[G_SPAN + a];
+    box_lo[a] = xmax(g[G_LO + a], start[a] - d);
+    box_hi[a] = xmin(g[G_HI + a], start[a] + d);
   }
   int first = K - 1;
   float cand[2];
   for (int k = 0; k < K; ++k) {
     float ck[2] = {box_lo[0] + u.at(4 + 2 * k) * (box_hi[0] - box_lo[0]),
                    box_lo[1] + u.at(5 + 2 * k) * (box_hi[1] - box_lo[1])};
-    if (!touching(c, start, ck)) {
+    if (!touching(g, start, ck)) {
       first = k;
       cand[0] = ck[0];
       cand[1] = ck[1];
@@ -587,8 +590,9 @@ inline void next_trial(const float* c, float* f, int* is, const Draws& u, const 
 inline void act_and_step(const float* c, float* f, int* is, const Draws& u, const float* hy, const float* pf,
                          const int* pi, int nb, int ncond, const float* x, const float* out, const float* u1_next) {
   // exploration.value_scale, noise, actor_gain.
+  const float* g = pf + ncond * (NFIELD + NIN) + nb;  // the learner's geometry
   const int full_at = is[I_FULLAT], trials = is[I_TRIALS], t = is[I_T];
-  const float shortfall = 1.0f - f[F_DIST] * c[C_INV_CUR_HI];
+  const float shortfall = 1.0f - f[F_DIST] * g[G_INV_CUR_HI];
   float ratio = (hy[HY_VAFTER] > 0.0f && full_at < 0) ? 1.0f : hy[HY_VRATIO];
   const bool gated = hy[HY_VGATE] > 0.0f;
   float relax = gated ? clip(shortfall / (gated ? hy[HY_VGATE] : 1.0f), 0.0f, 1.0f) : 0.0f;
@@ -628,7 +632,7 @@ inline void act_and_step(const float* c, float* f, int* is, const Draws& u, cons
   jac(c, a, j);
   mv2(j, moved + 2, hv);
   float* tgt = f + F_TGT;
-  const bool goal = touching(c, hand, tgt) && std::sqrt(hv[0] * hv[0] + hv[1] * hv[1]) < c[C_GOAL_SPEED] &&
+  const bool goal = touching(g, hand, tgt) && std::sqrt(hv[0] * hv[0] + hv[1] * hv[1]) < c[C_GOAL_SPEED] &&
                     !out_of_range;
   const bool cap = t_new >= static_cast<int>(c[C_MAX_STEPS]) && !goal && !out_of_range;
   const bool old_drifted = is[I_DRIFTED] != 0;
@@ -672,7 +676,7 @@ inline void act_and_step(const float* c, float* f, int* is, const Draws& u, cons
   is[I_PLEARN] = is[I_BLEARN];
   is[I_STEPS] += 1;
   // curriculum.after_step.
-  const float cur_lo = c[C_CUR_LO], cur_hi = c[C_CUR_HI];
+  const float cur_lo = g[G_CUR_LO], cur_hi = g[G_CUR_HI];
   const bool was_full = full_at >= 0;
   if (done) {
     const bool early = hy[HY_EARLY] > 0.0f;
@@ -706,7 +710,7 @@ template <int W>
 void run(const float* consts, float* fstate, int32_t* istate, const float* hyper, const float* pf, const int32_t* pi,
          const uint32_t* keys, int64_t n_learners, int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
   constexpr int LANES = W;
-  const int64_t npf = ncond * (NFIELD + NIN) + nb, npi = 4 * nb, n_groups = (n_learners + LANES - 1) / LANES;
+  const int64_t npf = ncond * (NFIELD + NIN) + nb + NGEOM, npi = 4 * nb, n_groups = (n_learners + LANES - 1) / LANES;
   Group<W>* groups = new Group<W>[n_groups]();
   // Layers 2 and 3 into lanes for the call, and back at its end.
   auto lanes = [&](bool in) {
@@ -743,7 +747,7 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
           idle_lane<W>(a, m);
           continue;
         }
-        observe(consts, fstate + l * NF, x[m], rows[m]);
+        observe(consts, pf + l * npf + ncond * (NFIELD + NIN) + nb, fstate + l * NF, x[m], rows[m]);
         layer1_in<W>(fstate + l * NF, istate + l * NI, hyper + l * NH, x[m], rows[m], u1[m], nz[m], a, m);
       }
       lanes_step<W>(consts, groups[g], a);
@@ -813,9 +817,10 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeChunk, RunChunk,
 
 // Pieces of the step for the tests, each against its JAX function: the network input of a learner's packed state
 // (x (NIN,), rows (2 NCODE,)), one arm step, and a step's draws (NU,).
-extern "C" void reach_native_observe(const float* consts, const float* fstate, float* x, int32_t* rows) {
+extern "C" void reach_native_observe(const float* consts, const float* geometry, const float* fstate, float* x,
+                                     int32_t* rows) {
   int r[2 * NCODE];
-  observe(consts, fstate, x, r);
+  observe(consts, geometry, fstate, x, r);
   for (int k = 0; k < 2 * NCODE; ++k) rows[k] = r[k];
 }
 

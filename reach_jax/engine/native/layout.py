@@ -11,17 +11,17 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax._src.lax import lax as lax_internal
 
-from reach_jax.config import Config, n_inputs
+from reach_jax.config import Config, n_inputs, workspace
 from reach_jax.config.hyper import NAMES as HYPER_NAMES
 from reach_jax.engine import random_stream
 from reach_jax.engine.learner_state import LearnerState, Stats
-from reach_jax.env import curriculum, task
-from reach_jax.physics import arm, sensor
+from reach_jax.physics import arm
 
 F32 = np.float32
 N_FIELD = 14  # a Field's floats: viscous (2, 2), stiffness (2, 2), anchor, constant, random
+# The hyperparameters the kernel's step reads (its HY_ order); a learner's geometry travels in its plan instead.
+STEP_HYPERS = tuple(name for name in HYPER_NAMES if name not in workspace.GEOMETRY_HYPERS)
 INT_FIELDS = (
     "valid", "terminal", "pending_learning", "t", "drifted", "trials", "full_at", "block_index", "block_learning",
     "block_catch", "steps",
@@ -48,15 +48,10 @@ def constants(cfg: Config) -> dict[str, np.ndarray]:
     l1, l2 = a.length
     s2 = a.com_fraction * l2
     i1, i2 = a.inertia_factor * m1 * l1**2, a.inertia_factor * m2 * l2**2
-    (x0, y0), (x1, y1) = sensor.field_bounds(s)
-    lo, hi = np.array([x0, y0], F32), np.array([x1, y1], F32)
-    edges = np.arange(s.n_cells, dtype=F32) * F32(s.cell_size)
-    xe, ye = F32(x0) + edges, F32(y0) + edges
     enc, offset = [], s.n_cells**2
     for c_lo, c_hi, n in _codes(cfg):
         enc += [c_lo, c_hi, F32(1) / F32((c_hi - c_lo) / (n - 1)), n, offset]
         offset += n
-    cur_lo, cur_hi = curriculum.bounds(cfg)
     tau_max = np.asarray(a.tau_max, F32)
     values = {
         "DT_HALF": 0.5 * a.dt, "DT": a.dt, "DT6": a.dt / 6.0,
@@ -66,15 +61,10 @@ def constants(cfg: Config) -> dict[str, np.ndarray]:
         "TAU_MAX": tau_max, "TWO_TAU": F32(2) * tau_max,
         "TH1_LO": a.theta1_range[0], "TH1_HI": a.theta1_range[1], "TH2_MIN": a.theta2_min,
         "TH2_STOP": a.theta2_stop, "STOP_SHARE": arm._stop_share(a), "ONE_LINK": float(a.one_link_stop),
-        "FLO": lo, "FHI": hi, "FSPAN": hi - lo,
-        # XLA folds (x0 + k c) + c to k c + (x0 + c).
-        "XE": xe, "YE": ye, "XE_HI": edges + (F32(x0) + F32(s.cell_size)),
-        "YE_HI": edges + (F32(y0) + F32(s.cell_size)),
-        "HALF_CELL": 0.5 * s.cell_size, "INV_CELL_AREA": F32(1) / F32(s.cell_size**2),
         "ENC": np.asarray(enc, F32),
-        "GHW": task.goal_half_width(cfg), "GOAL_SPEED": t.goal_speed, "MAX_STEPS": round(t.max_trial_time / a.dt),
+        "GOAL_SPEED": t.goal_speed, "MAX_STEPS": round(t.max_trial_time / a.dt),
         "DRIFT_AFTER": t.drift_after, "DRIFT_PER_STEP": t.drift_per_step,
-        "CUR_LO": cur_lo, "CUR_HI": cur_hi, "INV_CUR_HI": F32(1) / F32(cur_hi), "CUR_STEP": t.curriculum_step,
+        "CUR_STEP": t.curriculum_step,
         "NEUTRAL_FULL": float(t.drift_neutral_when_full),
         "IK_SHIFT": -(F32(l1**2) + F32(l2**2)), "IK_SCALE": F32(1) / F32(2 * l1 * l2),
         "P_RANGE": lc.p_range, "CRITIC_FLOOR": lc.critic_floor, "REWARD_GOAL": lc.reward_goal,
@@ -95,13 +85,39 @@ def header(cfg: Config, pad: int) -> str:
         "NCELL": cfg.sensor.n_cells, "NVIS": cfg.sensor.n_cells**2, "NIN": n_inputs(cfg), "H1": hidden_width(cfg, pad),
         "H2": cfg.network.hidden[1], "NO": cfg.network.n_out, "K": cfg.task.target_candidates,
         "NCODE": len(_codes(cfg)), "NFIELD": N_FIELD, "NU": random_stream.n_uniforms(cfg),
+        "NHYPER": len(STEP_HYPERS),
     }  # fmt: skip
     lines = [f"#define {k} {v}" for k, v in sizes.items()]
     index = 0
     for name, v in constants(cfg).items():
         lines.append(f"#define C_{name} {index}")
         index += len(v)
-    return "\n".join(["#pragma once", *lines, f"#define N_CONSTS {index}", ""])
+    lines.append(f"#define N_CONSTS {index}")
+    index = 0
+    for name, n in geometry_block(cfg.sensor.n_cells).items():
+        lines.append(f"#define G_{name} {index}")
+        index += n
+    return "\n".join(["#pragma once", *lines, f"#define NGEOM {index}", ""])
+
+
+def geometry_block(n_cells: int) -> dict[str, int]:
+    """The lengths of the parts of a learner's geometry row (`pack_geometry`), by their names in the kernel (G_)."""
+    edges = dict.fromkeys(("XE", "YE", "XE_HI", "YE_HI"), n_cells)
+    return {"LO": 2, "HI": 2, "SPAN": 2, **edges, "HALF": 1, "INV_AREA": 1, "GHW": 1, "CUR_LO": 1, "CUR_HI": 1,
+            "INV_CUR_HI": 1}  # fmt: skip
+
+
+def pack_geometry(geom, n_cells: int) -> jax.Array:
+    """(L, NGEOM) float32 rows of the learners' geometries (`task.Geometry`, learner axis first), each part computed
+    as the JAX step computes it from the same data (`sensor.cell_edges`, `place_trial`, `curriculum`), so that the
+    kernel reads the same bits."""
+    s = geom.sensor
+    k = jnp.arange(n_cells) * s.cell[:, None]
+    lo_edges, hi_edges = k[:, None] + s.lo[:, :, None], k[:, None] + (s.lo + s.cell[:, None])[:, :, None]
+    parts = [s.lo, s.hi, s.hi - s.lo, lo_edges[:, 0], lo_edges[:, 1], hi_edges[:, 0], hi_edges[:, 1]]
+    scalars = (0.5 * s.cell, s.inv_cell_area, geom.goal_half, geom.start_distance, geom.full_distance,
+               geom.inv_full_distance)  # fmt: skip
+    return jnp.concatenate([*parts, *(v[:, None] for v in scalars)], axis=1).astype(jnp.float32)
 
 
 def consts_vector(cfg: Config) -> np.ndarray:
@@ -149,11 +165,7 @@ def unpack_state(f: jax.Array, i: jax.Array, like: LearnerState) -> LearnerState
         size = int(np.prod(old.shape[1:], dtype=int))
         part = rows[kind][:, at[kind] : at[kind] + size]
         at[kind] += size
-        # Weakly typed where `like` is (as the JAX chunk returns the pending reward), so that a chunk's states type
-        # as its input did and the next chunk does not compile again; JAX has no public cast that keeps weak type.
-        return lax_internal._convert_element_type(
-            part.reshape(old.shape), np.dtype(old.dtype), weak_type=jax.typeof(old).weak_type
-        )
+        return part.reshape(old.shape).astype(old.dtype)
 
     a, e = like.agent, like.env
     tr, pend, st = e.trial, a.pending, like.counters.stats
@@ -187,15 +199,16 @@ def unpack_state(f: jax.Array, i: jax.Array, like: LearnerState) -> LearnerState
     )
 
 
-def pack_plan(plans) -> tuple[jax.Array, jax.Array, int, int]:
-    """(L, C (14 + NIN) + B) float32, (L, 4 B) int32 rows of the learners' plans, B blocks and C conditions."""
+def pack_plan(plans, n_cells: int) -> tuple[jax.Array, jax.Array, int, int]:
+    """(L, C (14 + NIN) + B + NGEOM) float32, (L, 4 B) int32 rows of the learners' plans (their geometry last), B
+    blocks and C conditions."""
     n, n_cond = plans.ends.shape[0], plans.conds.input_mask.shape[1]
     conds = jnp.concatenate([*_field_rows(plans.conds.field), plans.conds.input_mask], axis=-1).reshape(n, -1)
-    f = jnp.concatenate([conds, plans.catch.astype(jnp.float32)], axis=1)
+    f = jnp.concatenate([conds, plans.catch.astype(jnp.float32), pack_geometry(plans.geometry, n_cells)], axis=1)
     i = jnp.concatenate([plans.ends, plans.cond, plans.catch_cond, plans.learning.astype(jnp.int32)], axis=1)
     return f, i.astype(jnp.int32), plans.ends.shape[1], n_cond
 
 
 def pack_hyper(hypers) -> jax.Array:
-    """(L, 22) float32 rows of the hyperparameters in `hyper.TABLE`'s order."""
-    return jnp.stack([jnp.asarray(getattr(hypers, k), jnp.float32) for k in HYPER_NAMES], axis=1)
+    """(L, len(STEP_HYPERS)) float32 rows of the hyperparameters the step reads, in `hyper.TABLE`'s order."""
+    return jnp.stack([jnp.asarray(getattr(hypers, k), jnp.float32) for k in STEP_HYPERS], axis=1)
