@@ -201,7 +201,7 @@ def test_summarize_names_each_frames_field_viscous_and_reads_its_own_test_column
     lines = anatomy_report.headlines(result)
     assert list(lines) == ["viscous_mirror", "viscous"] and all(len(v) == 1 for v in lines.values())
     assert lines["viscous_mirror"][0] == (
-        "**Failure anatomy** ([anatomy.md](anatomy.md)), none → viscous_mirror: 50.0% of movements fail (100% folded;"
+        "**Failure anatomy** (`anatomy.md`), none → viscous_mirror: 50.0% of movements fail (100% folded;"
         " 83% in the goal square), 0.0% go out."
     )
     assert lines["viscous"][0].endswith("16.7% go out (100% θ2 < 0°; median 4.00 s).")

@@ -68,7 +68,8 @@ def headline(anatomy: dict, frame: str | None, recipe: int) -> str:
       recipe: the recipe's index.
     """
     body = plain_headline(anatomy, frame, recipe)
-    return f"**Failure anatomy** ([anatomy.md](anatomy.md)), {body}" if body else "Failure anatomy: no cell."
+    # The file is named, not linked: the docs pages copy claims.md in, where a link would point nowhere.
+    return f"**Failure anatomy** (`anatomy.md`), {body}" if body else "Failure anatomy: no cell."
 
 
 def plain_headline(anatomy: dict, frame: str | None, recipe: int) -> str:
