@@ -288,13 +288,25 @@ inline vf<W> vmin(vf<W> a, vf<W> b) {
   r = sel<W>(a == b, (vf<W>)((vi<W>)a | (vi<W>)b), r);
   return sel<W>(a != a, a, r);
 }
+// floor per lane: one rounding instruction where the target has it (floor is exact, so any route gives the same bits).
+template <int W>
+inline vf<W> vfloor(vf<W> x) {
+#if defined(__AVX__)
+  if constexpr (W == 8) return __builtin_ia32_roundps256(x, 0x9);
+#endif
+#if defined(__SSE4_1__)
+  if constexpr (W == 4) return __builtin_ia32_roundps(x, 0x9);
+#endif
+  for (int i = 0; i < W; ++i) x[i] = std::floor(x[i]);
+  return x;
+}
+
 // xla_exp per lane.
 template <int W>
 inline vf<W> vexp(vf<W> x) {
   x = sel<W>((x >= -87.8f) | (x != x), x, splat<W>(-87.8f));
   x = sel<W>((x <= 88.8f) | (x != x), x, splat<W>(88.8f));
-  vf<W> fx = 0.5f + x * bits(0x3FB8AA3B);
-  for (int i = 0; i < W; ++i) fx[i] = std::floor(fx[i]);
+  vf<W> fx = vfloor<W>(0.5f + x * bits(0x3FB8AA3B));
   fx = sel<W>(fx >= -127.0f, fx, splat<W>(-127.0f));
   fx = sel<W>(fx <= 127.0f, fx, splat<W>(127.0f));
   vf<W> r = x - bits(0x3F318000) * fx;
@@ -423,11 +435,16 @@ inline void layer1_in(const float* f, const int* is, const float* hy, const floa
     for (int v = 0; v < NV; ++v) acc[v] = acc[v] + x[i] * load(w1 + i * H1 + v * 8);
   };
   // A row whose input is 0 adds +0 to a sum that is never -0: it is skipped, and so are most of them.
+  // Branch-free: which inputs are 0 changes from step to step and would mispredict.
   nz.n = 0;
-  for (int i = 0; i < NVIS; ++i)
-    if (x[i] != 0.0f) nz.at[nz.n++] = i;
-  for (int k = 0; k < 2 * NCODE; ++k)
-    if (x[rows[k]] != 0.0f) nz.at[nz.n++] = rows[k];
+  for (int i = 0; i < NVIS; ++i) {
+    nz.at[nz.n] = i;
+    nz.n += x[i] != 0.0f;
+  }
+  for (int k = 0; k < 2 * NCODE; ++k) {
+    nz.at[nz.n] = rows[k];
+    nz.n += x[rows[k]] != 0.0f;
+  }
   for (int r = 0; r < nz.n; ++r) add_row(nz.at[r]);
   for (int v = 0; v < NV; ++v) {
     acc[v] = acc[v] + load(f + F_B1 + v * 8);
@@ -738,8 +755,10 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
   float x[LANES][NIN], u1[LANES][H1], u1_next[H1], out[NO];
   int rows[LANES][2 * NCODE];
   bool active[LANES];
-  for (int64_t s = 0; s < n_steps; ++s)
-    for (int64_t g = 0; g < n_groups; ++g) {
+  // Each group of learners takes every step of the call before the next group starts: learners never interact
+  // within a chunk, and one group's weights and scratch stay in the core's caches.
+  for (int64_t g = 0; g < n_groups; ++g)
+    for (int64_t s = 0; s < n_steps; ++s) {
       for (int m = 0; m < LANES; ++m) {
         const int64_t l = g * LANES + m;
         active[m] = l < n_learners && istate[l * NI + I_TRIALS] < budget;  // frozen: budgeted_step keeps it all
