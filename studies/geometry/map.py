@@ -25,6 +25,8 @@ from reach_jax.evaluate import anatomy, frames, geometry
 
 SCRIPT = "studies/geometry/map.py"
 FRAME = "viscous_mirror"  # the frame the map judges (config version 14's default)
+BASE_CELL, BASE_NOISE = 0.04, 0.2  # [m], bound: the points that vary only the position, drawn as a heat map
+PANELS = (("D", "D [points]", "viridis_r"), ("out", "none → field out %", "magma_r"), ("fold", "folded %", "magma_r"))
 
 
 def _by_cell(rows: list[dict]) -> dict:
@@ -114,27 +116,63 @@ def markdown(pts: list[dict], found: dict, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _is_base(p: dict) -> bool:
+    return bool(np.isclose(p["cell_m"], BASE_CELL) and np.isclose(p["noise"], BASE_NOISE))
+
+
+def _value(p: dict, key: str) -> float:
+    return {"D": p["D"], "out": p["none_field"]["out"], "fold": p["none_field_folded"]}[key]
+
+
+def _heat(ax, pts: list[dict], key: str, label: str, cmap: str, fig: Figure) -> None:
+    """One measure over the positions, as a grid of centres (lateral x forward), its values written in."""
+    xs = sorted({p["centre_m"][0] for p in pts})
+    ys = sorted({p["centre_m"][1] for p in pts})
+    grid = np.full((len(ys), len(xs)), np.nan)
+    for p in pts:
+        grid[ys.index(p["centre_m"][1]), xs.index(p["centre_m"][0])] = _value(p, key)
+    image = ax.imshow(grid, origin="lower", cmap=cmap, aspect="auto")
+    for (i, j), v in np.ndenumerate(grid):
+        if not np.isnan(v):
+            ax.text(j, i, f"{v:.1f}", ha="center", va="center", fontsize=9, bbox={"fc": "w", "alpha": 0.7, "lw": 0})
+    ax.set_xticks(range(len(xs)), [f"{x:+.3f}" for x in xs])
+    ax.set_yticks(range(len(ys)), [f"{y:.2f}" for y in ys])
+    ax.set(xlabel="field centre, lateral x [m]", ylabel="field centre, forward y [m]", title=f"{label}, by position")
+    fig.colorbar(image, ax=ax, label=label)
+
+
+def _variants(ax, pts: list[dict], key: str, label: str) -> None:
+    """One measure at each centre that a size or a bound varies: today's cell and bound, then each variant."""
+    base = {tuple(p["centre_m"]): p for p in pts if _is_base(p)}
+    others = [p for p in pts if not _is_base(p)]
+    names, values = [], []
+    for c in dict.fromkeys(tuple(p["centre_m"]) for p in others):
+        at = [base[c]] if c in base else []
+        for p in at + [q for q in others if tuple(q["centre_m"]) == c]:
+            what = "today's" if _is_base(p) else (
+                f"bound {p['noise']:g}" if np.isclose(p["cell_m"], BASE_CELL) else f"cell {p['cell_m']:.3f}"
+            )
+            names.append(f"({c[0]:+.3f}, {c[1]:.2f}) {what}")
+            values.append(_value(p, key))
+    bars = ax.barh(range(len(values)), values, color=["0.6" if n.endswith("today's") else "C0" for n in names])
+    ax.bar_label(bars, fmt="%.1f", fontsize=7)
+    ax.set_yticks(range(len(names)), names, fontsize=7)
+    ax.invert_yaxis()
+    ax.set(xlabel=label, title=f"{label}, sizes and bounds (grey: today's)")
+
+
 def figure(pts: list[dict]) -> Figure:
-    """The fields where they sit, coloured by D, by the unexpected field's outs and folds; damping against outs."""
-    fig = Figure(figsize=(12, 9), layout="constrained")
-    axes = fig.subplots(2, 2)
-    xy = np.array([p["centre_m"] for p in pts])
-    size = np.array([40 + 4000 * p["cell_m"] for p in pts])
-    panels = (("D", "D [points]", "viridis_r"), ("out", "none → field out %", "magma"), ("fold", "folded %", "magma"))
-    values = {
-        "D": [p["D"] for p in pts],
-        "out": [p["none_field"]["out"] for p in pts],
-        "fold": [p["none_field_folded"] for p in pts],
-    }
-    for ax, (key, label, cmap) in zip(axes.flat[:3], panels, strict=True):
-        dots = ax.scatter(xy[:, 0], xy[:, 1], c=values[key], s=size, cmap=cmap, edgecolors="k")
-        for p, (x, y) in zip(pts, xy, strict=True):
-            ax.annotate(f"{p['noise']:g}", (x, y), textcoords="offset points", xytext=(8, 6), fontsize=7)
-        fig.colorbar(dots, ax=ax, label=label)
-        title = f"{label} (marker size: cell; label: bound)"
-        ax.set(xlabel="field centre x [m]", ylabel="field centre y [m]", title=title)
-        ax.set_aspect("equal", adjustable="datalim")
-    ax = axes.flat[3]
+    """Heat maps of D, the unexpected field's outs and folds over the positions; the sizes and bounds beside their
+    centres; each no-field network's damping against its outs."""
+    fig = Figure(figsize=(15, 11), layout="constrained")
+    axes = fig.subplots(3, 3)
+    positions = [p for p in pts if _is_base(p)]
+    for col, (key, label, cmap) in enumerate(PANELS):
+        _heat(axes[0, col], positions, key, label, cmap, fig)
+        _variants(axes[1, col], pts, key, label)
+    for ax in axes[2, 1:]:
+        ax.remove()
+    ax = axes[2, 0]
     for p in pts:
         ax.scatter(p["damping_per_network"], p["none_field_out_per_network"], s=18)
     ax.set(xlabel="no-field damping along the pushing axis [N s/m]", ylabel="none → field out %", title="per network")
