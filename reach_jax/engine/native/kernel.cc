@@ -169,9 +169,61 @@ SinCos pick_sincos() {
 }
 const SinCos sincos_n = pick_sincos();
 
-struct Arm {
-  float s1, c1, s12, c12, s2, c2;  // sines and cosines of theta1, theta1 + theta2, theta2
+// Learners along the SIMD lanes, W at a time (8 or 4), one a lane: for the arm's step and for layers 2 and 3 of the
+// network, whose units are too few to fill a vector. Each lane does exactly one learner's operations in the JAX
+// step's order, so lanes never mix. Layer 1's 32 units take a vector of 8 the other way, one learner at a time.
+template <int W>
+struct Vec {
+  typedef float f __attribute__((vector_size(4 * W)));
+  typedef int32_t i __attribute__((vector_size(4 * W)));
 };
+template <int W>
+using vf = typename Vec<W>::f;
+template <int W>
+using vi = typename Vec<W>::i;
+typedef vf<8> v8;
+typedef float v8u __attribute__((vector_size(32), aligned(4)));  // an unaligned load or store of 8 floats
+
+inline v8 load(const float* p) { return *reinterpret_cast<const v8u*>(p); }
+inline void store(float* p, v8 a) { *reinterpret_cast<v8u*>(p) = a; }
+
+template <int W>
+inline vf<W> vload(const float* p) {
+  vf<W> a;
+  std::memcpy(&a, p, sizeof a);
+  return a;
+}
+template <int W>
+inline void vstore(float* p, vf<W> a) {
+  std::memcpy(p, &a, sizeof a);
+}
+template <int W>
+inline vf<W> splat(float a) {
+  return vf<W>{} + a;
+}
+template <int W>
+inline vf<W> sel(vi<W> m, vf<W> a, vf<W> b) {  // m: all ones (true) or zero per lane
+  return m ? a : b;
+}
+template <int W>
+inline vf<W> vmax(vf<W> a, vf<W> b) {  // llvm.maximum per lane: NaN wins, +0 > -0
+  vf<W> r = sel<W>(a > b, a, b);
+  r = sel<W>(a == b, (vf<W>)((vi<W>)a & (vi<W>)b), r);
+  return sel<W>(a != a, a, r);
+}
+template <int W>
+inline vf<W> vmin(vf<W> a, vf<W> b) {
+  vf<W> r = sel<W>(a < b, a, b);
+  r = sel<W>(a == b, (vf<W>)((vi<W>)a | (vi<W>)b), r);
+  return sel<W>(a != a, a, r);
+}
+
+// Sines and cosines of theta1, theta1 + theta2, theta2: of one arm (float) or of W learners' (vf<W>).
+template <class T>
+struct Trig {
+  T s1, c1, s12, c12, s2, c2;
+};
+typedef Trig<float> Arm;
 
 inline Arm trig(const float* th) {
   Arm a;
@@ -185,13 +237,25 @@ inline Arm trig(const float* th) {
   return a;
 }
 
-inline void hand_pos(const float* c, float c1, float s1, float c12, float s12, float* hand) {
+template <int W>
+inline Trig<vf<W>> vtrig(vf<W> th0, vf<W> th1) {
+  float x[3][W], s[3][W], c[3][W];
+  vstore<W>(x[0], th0);
+  vstore<W>(x[1], th0 + th1);
+  vstore<W>(x[2], th1);
+  sincos_n(x[0], s[0], c[0], 3 * W);
+  return {vload<W>(s[0]), vload<W>(c[0]), vload<W>(s[1]), vload<W>(c[1]), vload<W>(s[2]), vload<W>(c[2])};
+}
+
+template <class T>
+inline void hand_pos(const float* c, T c1, T s1, T c12, T s12, T* hand) {
   hand[0] = c[C_L1] * c1 + c[C_L2] * c12;
   hand[1] = c[C_L1] * s1 + c[C_L2] * s12;
 }
 
 // jacobian(theta) as [[j00, j01], [j10, j11]].
-inline void jac(const float* c, const Arm& a, float* j) {
+template <class T>
+inline void jac(const float* c, const Trig<T>& a, T* j) {
   j[0] = c[C_NEG_L1] * a.s1 - c[C_L2] * a.s12;
   j[1] = c[C_NEG_L2] * a.s12;
   j[2] = c[C_L1] * a.c1 + c[C_L2] * a.c12;
@@ -199,86 +263,132 @@ inline void jac(const float* c, const Arm& a, float* j) {
 }
 
 // matvec2(a, v) = a[:, 1] v1 + a[:, 0] v0 for a row-major (2, 2).
-inline void mv2(const float* a, const float* v, float* out) {
+template <class T>
+inline void mv2(const T* a, const T* v, T* out) {
   out[0] = a[1] * v[1] + a[0] * v[0];
   out[1] = a[3] * v[1] + a[2] * v[0];
 }
 
-// _rhs_and_mass: rhs (2,), M as m00, m01 (= m10), m11.
-inline void rhs_mass(const float* c, const float* s, const float* tau, const float* field, const float* force,
-                     float* rhs, float* m) {
-  Arm a = trig(s);
-  float hand[2], j[4], hv[2];
-  hand_pos(c, a.c1, a.s1, a.c12, a.s12, hand);
-  jac(c, a, j);
-  mv2(j, s + 2, hv);
-  float rel[2] = {hand[0] - field[FD_X0], hand[1] - field[FD_X0 + 1]};
-  float pv[2], pk[2];
-  mv2(field + FD_B, hv, pv);
-  mv2(field + FD_K, rel, pk);
-  float f[2] = {(pv[0] + pk[0]) + field[FD_C] + force[0], (pv[1] + pk[1]) + field[FD_C + 1] + force[1]};
-  float jt[4] = {j[0], j[2], j[1], j[3]};
-  float jf[2];
-  mv2(jt, f, jf);
-  float w0 = s[2], w1 = s[3];
-  float h = c[C_M2L1S2] * a.s2;
-  float vt0 = -h * (2.0f * w0 + w1) * w1 + c[C_B1] * w0;
-  float vt1 = h * (w0 * w0) + c[C_B2] * w1;
-  rhs[0] = (tau[0] + jf[0]) - vt0;
-  rhs[1] = (tau[1] + jf[1]) - vt1;
+// The arm step's lanes: what it reads of each learner, and the moved state.
+template <int W>
+struct ArmLanes {
+  using V = vf<W>;
+  V s[4], tau[2], field[NFIELD], force[2];  // in: the arm's state, the torques, the field, the force
+  Trig<V> at;                                // in: the trig of s; out: that of moved
+  V moved[4];                                // out
+};
+
+// _rhs_and_mass at state s with its trig a: rhs (2,), M as m00, m01 (= m10), m11.
+template <int W>
+inline void rhs_mass(const float* c, const vf<W>* s, const Trig<vf<W>>& a, const ArmLanes<W>& in, vf<W>* rhs,
+                     vf<W>* m) {
+  using V = vf<W>;
+  const V* field = in.field;
+  V hand[2], j[4], hv[2];
+  hand_pos<V>(c, a.c1, a.s1, a.c12, a.s12, hand);
+  jac<V>(c, a, j);
+  mv2<V>(j, s + 2, hv);
+  V rel[2] = {hand[0] - field[FD_X0], hand[1] - field[FD_X0 + 1]};
+  V pv[2], pk[2];
+  mv2<V>(field + FD_B, hv, pv);
+  mv2<V>(field + FD_K, rel, pk);
+  V f[2] = {(pv[0] + pk[0]) + field[FD_C] + in.force[0], (pv[1] + pk[1]) + field[FD_C + 1] + in.force[1]};
+  V jt[4] = {j[0], j[2], j[1], j[3]};
+  V jf[2];
+  mv2<V>(jt, f, jf);
+  V w0 = s[2], w1 = s[3];
+  V h = c[C_M2L1S2] * a.s2;
+  V vt0 = -h * (2.0f * w0 + w1) * w1 + c[C_B1] * w0;
+  V vt1 = h * (w0 * w0) + c[C_B2] * w1;
+  rhs[0] = (in.tau[0] + jf[0]) - vt0;
+  rhs[1] = (in.tau[1] + jf[1]) - vt1;
   m[1] = c[C_I2] + c[C_M2L1S2] * a.c2;
   m[0] = c[C_TWO_M2L1S2] * a.c2 + c[C_M11_C];  // XLA folds (i1 + i2) + x + m2 l1^2 to x + const
-  m[2] = c[C_I2];
+  m[2] = splat<W>(c[C_I2]);
 }
 
-inline void accel(const float* rhs, const float* m, bool held, float* acc) {
-  float m01 = held ? 0.0f : m[1], m10 = held ? 0.0f : m[1];
-  float m11 = held ? 1.0f : m[2], r1 = held ? 0.0f : rhs[1];
-  float inv = 1.0f / (m[0] * m11 - m01 * m10);
+// The accelerations, the elbow held where `held` (all ones or zero per lane).
+template <int W>
+inline void accel(const vf<W>* rhs, const vf<W>* m, vi<W> held, vf<W>* acc) {
+  using V = vf<W>;
+  const V zero = {};
+  V m01 = sel<W>(held, zero, m[1]), m10 = m01;
+  V m11 = sel<W>(held, zero + 1.0f, m[2]), r1 = sel<W>(held, zero, rhs[1]);
+  V inv = 1.0f / (m[0] * m11 - m01 * m10);
   acc[0] = (m11 * rhs[0] - m01 * r1) * inv;
   acc[1] = (m[0] * r1 - m10 * rhs[0]) * inv;
 }
 
-inline void dsdt(const float* c, const float* s, const float* tau, const float* field, const float* force, bool held,
-                 float* k) {
-  float rhs[2], m[3];
-  rhs_mass(c, s, tau, field, force, rhs, m);
+template <int W>
+inline void dsdt(const float* c, const vf<W>* s, const ArmLanes<W>& in, vi<W> held, vf<W>* k) {
+  vf<W> rhs[2], m[3];
+  rhs_mass<W>(c, s, vtrig<W>(s[0], s[1]), in, rhs, m);
   k[0] = s[2];
   k[1] = s[3];
-  accel(rhs, m, held, k + 2);
+  accel<W>(rhs, m, held, k + 2);
 }
 
-// arm.step: RK4 with the one-link stop, then the elbow stop.
-inline void arm_step(const float* c, const float* s, const float* tau, const float* field, const float* force,
-                     float* out) {
-  float rhs[2], m[3], free_acc[2], k1[4], k2[4], k3[4], k4[4], tmp[4];
-  rhs_mass(c, s, tau, field, force, rhs, m);
-  accel(rhs, m, false, free_acc);
-  bool held = c[C_ONE_LINK] != 0.0f && (s[1] >= c[C_TH2_STOP]) && (s[3] >= 0.0f) && (free_acc[1] >= 0.0f);
+// arm.step of every lane: RK4 with the one-link stop, then the elbow stop; and the moved state's trig.
+template <int W>
+inline void arm_step(const float* c, ArmLanes<W>& a) {
+  using V = vf<W>;
+  const V* s = a.s;
+  V rhs[2], m[3], free_acc[2], k1[4], k2[4], k3[4], k4[4], tmp[4];
+  rhs_mass<W>(c, s, a.at, a, rhs, m);
+  vi<W> held = {};
+  accel<W>(rhs, m, held, free_acc);
+  if (c[C_ONE_LINK] != 0.0f) held = (s[1] >= c[C_TH2_STOP]) & (s[3] >= 0.0f) & (free_acc[1] >= 0.0f);
   k1[0] = s[2];
   k1[1] = s[3];
-  if (held) {
-    accel(rhs, m, true, k1 + 2);
-  } else {
-    k1[2] = free_acc[0];
-    k1[3] = free_acc[1];
-  }
+  accel<W>(rhs, m, held, k1 + 2);  // free_acc where not held
   for (int i = 0; i < 4; ++i) tmp[i] = s[i] + c[C_DT_HALF] * k1[i];
-  dsdt(c, tmp, tau, field, force, held, k2);
+  dsdt<W>(c, tmp, a, held, k2);
   for (int i = 0; i < 4; ++i) tmp[i] = s[i] + c[C_DT_HALF] * k2[i];
-  dsdt(c, tmp, tau, field, force, held, k3);
+  dsdt<W>(c, tmp, a, held, k3);
   for (int i = 0; i < 4; ++i) tmp[i] = s[i] + c[C_DT] * k3[i];
-  dsdt(c, tmp, tau, field, force, held, k4);
-  float r[4];
+  dsdt<W>(c, tmp, a, held, k4);
+  V r[4];
   for (int i = 0; i < 4; ++i) r[i] = s[i] + c[C_DT6] * (((k1[i] + 2.0f * k2[i]) + 2.0f * k3[i]) + k4[i]);
-  bool past = r[1] >= c[C_TH2_STOP];
-  float omega2 = past ? xmin(r[3], 0.0f) : r[3];
-  float kept = r[2] + (r[3] - omega2) * c[C_STOP_SHARE];
-  out[0] = r[0];
-  out[1] = past ? c[C_TH2_STOP] : r[1];
-  out[2] = (c[C_ONE_LINK] != 0.0f && past) ? kept : r[2];
-  out[3] = omega2;
+  const vi<W> past = r[1] >= c[C_TH2_STOP];
+  const V omega2 = sel<W>(past, vmin<W>(r[3], V{}), r[3]);
+  const V kept = r[2] + (r[3] - omega2) * c[C_STOP_SHARE];
+  a.moved[0] = r[0];
+  a.moved[1] = sel<W>(past, splat<W>(c[C_TH2_STOP]), r[1]);
+  a.moved[2] = c[C_ONE_LINK] != 0.0f ? sel<W>(past, kept, r[2]) : r[2];
+  a.moved[3] = omega2;
+  a.at = vtrig<W>(a.moved[0], a.moved[1]);
 }
+
+// Learner l into lane l of the arm step: its state, its trig, torques tau, field and force.
+template <int W>
+inline void arm_in(ArmLanes<W>& a, int l, const float* f, const Arm& at, const float* tau) {
+  for (int i = 0; i < 4; ++i) a.s[i][l] = f[F_ARM + i];
+  for (int i = 0; i < 2; ++i) {
+    a.tau[i][l] = tau[i];
+    a.force[i][l] = f[F_FORCE + i];
+  }
+  for (int i = 0; i < NFIELD; ++i) a.field[i][l] = f[F_FIELD + i];
+  a.at.s1[l] = at.s1;
+  a.at.c1[l] = at.c1;
+  a.at.s12[l] = at.s12;
+  a.at.c12[l] = at.c12;
+  a.at.s2[l] = at.s2;
+  a.at.c2[l] = at.c2;
+}
+
+// A lane with no learner: the arm at rest at 0, in no field.
+template <int W>
+inline void arm_idle(ArmLanes<W>& a, int l) {
+  static const float zero[NF] = {};
+  const float tau[2] = {};
+  arm_in<W>(a, l, zero, trig(zero + F_ARM), tau);
+}
+
+template <int W>
+inline Arm lane_trig(const Trig<vf<W>>& a, int l) {
+  return {a.s1[l], a.c1[l], a.s12[l], a.c12[l], a.s2[l], a.c2[l]};
+}
+
 
 // One sensor axis: the overlap of the cells [lo_k, hi_k] with [lo, hi].
 inline void overlap(const float* cell_lo, const float* cell_hi, float lo, float hi, float* o) {
@@ -286,11 +396,11 @@ inline void overlap(const float* cell_lo, const float* cell_hi, float lo, float 
 }
 
 // sensor.render in the learner's geometry g (`layout.pack_geometry`), then encoding.encode masked, and the coded
-// support rows: x (NIN,), rows (2 * NCODE,).
-inline void observe(const float* c, const float* g, const float* f, float* x, int* rows) {
+// support rows: x (NIN,), rows (2 * NCODE,). at: the trig of the learner's arm.
+inline void observe(const float* c, const float* g, const float* f, const Arm& at, float* x, int* rows) {
   const float* arm = f + F_ARM;
   float hand[2];
-  hand_pos(c, cosf(arm[0]), sinf(arm[0]), cosf(arm[0] + arm[1]), sinf(arm[0] + arm[1]), hand);
+  hand_pos(c, at.c1, at.s1, at.c12, at.s12, hand);
   const float* tgt = f + F_TGT;
   const float half = g[G_HALF];
   const float *xlo = g + G_XE, *ylo = g + G_YE, *xhi = g + G_XE_HI, *yhi = g + G_YE_HI;
@@ -325,44 +435,6 @@ inline void observe(const float* c, const float* g, const float* f, float* x, in
   }
 }
 
-// Learners along the SIMD lanes, W at a time (8 or 4), one a lane, for layers 2 and 3 of the network, whose
-// units are too few to fill a vector. Each lane does exactly one learner's operations in the JAX step's order, so
-// lanes never mix. Layer 1's 32 units take a vector of 8 the other way, one learner at a time.
-template <int W>
-struct Vec {
-  typedef float f __attribute__((vector_size(4 * W)));
-  typedef int32_t i __attribute__((vector_size(4 * W)));
-};
-template <int W>
-using vf = typename Vec<W>::f;
-template <int W>
-using vi = typename Vec<W>::i;
-typedef vf<8> v8;
-typedef float v8u __attribute__((vector_size(32), aligned(4)));  // an unaligned load or store of 8 floats
-
-inline v8 load(const float* p) { return *reinterpret_cast<const v8u*>(p); }
-inline void store(float* p, v8 a) { *reinterpret_cast<v8u*>(p) = a; }
-
-template <int W>
-inline vf<W> splat(float a) {
-  return vf<W>{} + a;
-}
-template <int W>
-inline vf<W> sel(vi<W> m, vf<W> a, vf<W> b) {  // m: all ones (true) or zero per lane
-  return m ? a : b;
-}
-template <int W>
-inline vf<W> vmax(vf<W> a, vf<W> b) {  // llvm.maximum per lane: NaN wins, +0 > -0
-  vf<W> r = sel<W>(a > b, a, b);
-  r = sel<W>(a == b, (vf<W>)((vi<W>)a & (vi<W>)b), r);
-  return sel<W>(a != a, a, r);
-}
-template <int W>
-inline vf<W> vmin(vf<W> a, vf<W> b) {
-  vf<W> r = sel<W>(a < b, a, b);
-  r = sel<W>(a == b, (vf<W>)((vi<W>)a | (vi<W>)b), r);
-  return sel<W>(a != a, a, r);
-}
 // floor per lane: one rounding instruction where the target has it (floor is exact, so any route gives the same bits).
 template <int W>
 inline vf<W> vfloor(vf<W> x) {
@@ -605,6 +677,7 @@ inline void threefry(uint32_t k0, uint32_t k1, uint32_t& x0, uint32_t& x1) {
 
 struct Draws {
   uint32_t k0, k1;  // fold_in(key, step)
+  Draws() = default;
   Draws(const uint32_t* key, int32_t step) : k0(0), k1(static_cast<uint32_t>(step)) { threefry(key[0], key[1], k0, k1); }
   float at(int j) const {  // the j-th of the step's uniforms
     uint32_t b0 = 0, b1 = static_cast<uint32_t>(j);
@@ -677,12 +750,14 @@ inline void next_trial(const float* c, float* f, int* is, const Draws& u, const 
   is[I_DRIFTED] = 0;
 }
 
-// The rest of rollout.budgeted_step of one active learner, in place, after its network's TS step: exploration, the
-// environment's step, the counters and the pending step. x: x(t); out: its outputs; u1_next: the next Pending.u1.
-inline void act_and_step(const float* c, float* f, int* is, const Draws& u, const float* hy, const float* pf,
-                         const int* pi, int nb, int ncond, const float* x, const float* out, const float* u1_next) {
-  // exploration.value_scale, noise, actor_gain.
-  const float* g = pf + ncond * (NFIELD + NIN) + nb;  // the learner's geometry
+// What a learner's exploration gives its step: the torques, and the pending step's noise and gain.
+struct Act {
+  float tau[2], rnd[2], gain;
+};
+
+// exploration.value_scale, noise, actor_gain of one active learner in its geometry g, from x(t)'s outputs `out`.
+inline Act explore(const float* c, const float* f, const int* is, const Draws& u, const float* hy, const float* g,
+                   const float* out) {
   const int full_at = is[I_FULLAT], trials = is[I_TRIALS], t = is[I_T];
   const float shortfall = 1.0f - f[F_DIST] * g[G_INV_CUR_HI];
   float ratio = (hy[HY_VAFTER] > 0.0f && full_at < 0) ? 1.0f : hy[HY_VRATIO];
@@ -701,23 +776,31 @@ inline void act_and_step(const float* c, float* f, int* is, const Draws& u, cons
   const float b = silent ? 0.0f : sched * scale;
   const float corr = hy[HY_CORR];
   const float root = std::sqrt(1.0f - corr * corr) * b;
-  float carried[2], fresh[2], tau[2], rnd[2];
+  Act act;
   for (int i = 0; i < 2; ++i) {
-    carried[i] = (silent ? 0.0f : corr) * f[F_PRND + i];
-    fresh[i] = root * (2.0f * u.at(i) - 1.0f);
-    rnd[i] = carried[i] + fresh[i];
+    const float carried = (silent ? 0.0f : corr) * f[F_PRND + i];
+    const float fresh = root * (2.0f * u.at(i) - 1.0f);
+    act.rnd[i] = carried + fresh;
     const float tm = c[C_TAU_MAX + i];
-    tau[i] = clip(c[C_TWO_TAU + i] * ((out[1 + i] + carried[i]) + fresh[i]), -tm, tm);
+    act.tau[i] = clip(c[C_TWO_TAU + i] * ((out[1 + i] + carried) + fresh), -tm, tm);
   }
   const bool on = hy[HY_GPOW] > 0.0f && scale > 0.0f;
-  const float gain = hy[HY_GAIN] * (on ? powf(on ? scale : 1.0f, -hy[HY_GPOW]) : 1.0f);
+  act.gain = hy[HY_GAIN] * (on ? powf(on ? scale : 1.0f, -hy[HY_GPOW]) : 1.0f);
+  return act;
+}
+
+// The rest of rollout.budgeted_step of one active learner, in place, after its network's TS step and its arm's
+// step to `moved`: the trial's end, the counters and the pending step. at: moved's trig, then that of the arm the
+// learner's next step starts from.
+inline void finish(const float* c, float* f, int* is, const Draws& u, const float* hy, const float* pf, const int* pi,
+                   int nb, int ncond, const float* out, const Act& act, const float* moved, Arm& at) {
+  const float* g = pf + ncond * (NFIELD + NIN) + nb;  // the learner's geometry
+  const int full_at = is[I_FULLAT], trials = is[I_TRIALS], t = is[I_T];
   // env.step: the trial one step on.
   const float gate_h = hy[HY_DGATE];
   const bool gate = gate_h <= 0.0f || f[F_FAIL] > gate_h;
-  float moved[4];
-  arm_step(c, f + F_ARM, tau, f + F_FIELD, f + F_FORCE, moved);
   const int t_new = t + 1;
-  Arm a = trig(moved);
+  const Arm a = at;
   float hand[2], j[4], hv[2];
   hand_pos(c, a.c1, a.s1, a.c12, a.s12, hand);
   const bool out_of_range = moved[0] < c[C_TH1_LO] || moved[0] > c[C_TH1_HI] || moved[1] < c[C_TH2_MIN];
@@ -756,13 +839,11 @@ inline void act_and_step(const float* c, float* f, int* is, const Draws& u, cons
     f[F_NMAX] = static_cast<float>(t_new) > lam_n ? static_cast<float>(t_new) : lam_n;
   }
   // The pending step.
-  std::memcpy(f + F_PX, x, sizeof(float) * NIN);
   for (int k = 0; k < NO; ++k) f[F_POUT + k] = out[k];
-  f[F_PRND] = rnd[0];
-  f[F_PRND + 1] = rnd[1];
+  f[F_PRND] = act.rnd[0];
+  f[F_PRND + 1] = act.rnd[1];
   f[F_PREW] = (goal ? c[C_REWARD_GOAL] : 0.0f) + (out_of_range ? c[C_REWARD_OUT] : 0.0f);
-  std::memcpy(f + F_PU1, u1_next, sizeof(float) * H1);
-  f[F_PGAIN] = gain;
+  f[F_PGAIN] = act.gain;
   is[I_PVALID] = !cap;
   is[I_PTERM] = goal || out_of_range;
   is[I_PLEARN] = is[I_BLEARN];
@@ -783,11 +864,12 @@ inline void act_and_step(const float* c, float* f, int* is, const Draws& u, cons
   is[I_TRIALS] = trials + done;
   if (done) {
     next_trial(c, f, is, u, pf, pi, nb, ncond);
+    at = trig(f + F_ARM);
   } else {
     std::memcpy(f + F_PARM, f + F_ARM, sizeof(float) * 4);
     std::memcpy(f + F_ARM, moved, sizeof(float) * 4);
-    f[F_PTAU] = tau[0];
-    f[F_PTAU + 1] = tau[1];
+    f[F_PTAU] = act.tau[0];
+    f[F_PTAU + 1] = act.tau[1];
     if (target_moved) {
       tgt[0] = tgt[0] + gap[0] * mv;
       tgt[1] = tgt[1] + gap[1] * mv;
@@ -825,9 +907,14 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
     for (int i = 0; i < NIN; ++i)
       if (fstate[l * NF + F_PX + i] != 0.0f) pending[l].at[pending[l].n++] = i;
   }
+  Arm* at = new Arm[n_learners];  // the trig of each learner's arm, kept from step to step
+  for (int64_t l = 0; l < n_learners; ++l) at[l] = trig(fstate + l * NF + F_ARM);
   Rows nz[LANES];
   Lanes<W> a;
-  float x[LANES][NIN], u1[LANES][H1], u1_next[H1], out[NO];
+  ArmLanes<W> arm;
+  Act act[LANES];
+  Draws draws[LANES];
+  float x[LANES][NIN], u1[LANES][H1], out[LANES][NO];
   int rows[LANES][2 * NCODE];
   bool active[LANES];
   // Each group of learners takes every step of the call before the next group starts: learners never interact
@@ -839,9 +926,10 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
         active[m] = l < n_learners && istate[l * NI + I_TRIALS] < budget;  // frozen: budgeted_step keeps it all
         if (!active[m]) {
           idle_lane<W>(a, m);
+          arm_idle<W>(arm, m);
           continue;
         }
-        observe(consts, pf + l * npf + ncond * (NFIELD + NIN) + nb, fstate + l * NF, x[m], rows[m]);
+        observe(consts, pf + l * npf + ncond * (NFIELD + NIN) + nb, fstate + l * NF, at[l], x[m], rows[m]);
         layer1_in<W>(fstate + l * NF, istate + l * NI, hyper + l * NH, x[m], rows[m], u1[m], nz[m], a, m);
       }
       lanes_step<W>(consts, groups[g], a);
@@ -849,16 +937,29 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
         if (!active[m]) continue;
         const int64_t l = g * LANES + m;
         float* f = fstate + l * NF;
-        layer1_out<W>(f, x[m], nz[m], pending[l], u1[m], a, m, consts, u1_next);
+        layer1_out<W>(f, x[m], nz[m], pending[l], u1[m], a, m, consts, f + F_PU1);
+        std::memcpy(f + F_PX, x[m], sizeof(float) * NIN);  // the pending step's x, now that layer 1 has its old one
         pending[l] = nz[m];
-        for (int k = 0; k < NO; ++k) out[k] = a.out[k][m];
-        act_and_step(consts, f, istate + l * NI, Draws(keys + 2 * l, istate[l * NI + I_STEPS]), hyper + l * NH, pf + l * npf,
-                     pi + l * npi, static_cast<int>(nb), static_cast<int>(ncond), x[m], out, u1_next);
+        for (int k = 0; k < NO; ++k) out[m][k] = a.out[k][m];
+        draws[m] = Draws(keys + 2 * l, istate[l * NI + I_STEPS]);
+        act[m] = explore(consts, f, istate + l * NI, draws[m], hyper + l * NH, pf + l * npf + ncond * (NFIELD + NIN) + nb,
+                         out[m]);
+        arm_in<W>(arm, m, f, at[l], act[m].tau);
+      }
+      arm_step<W>(consts, arm);
+      for (int m = 0; m < LANES; ++m) {
+        if (!active[m]) continue;
+        const int64_t l = g * LANES + m;
+        const float moved[4] = {arm.moved[0][m], arm.moved[1][m], arm.moved[2][m], arm.moved[3][m]};
+        at[l] = lane_trig<W>(arm.at, m);
+        finish(consts, fstate + l * NF, istate + l * NI, draws[m], hyper + l * NH, pf + l * npf, pi + l * npi,
+               static_cast<int>(nb), static_cast<int>(ncond), out[m], act[m], moved, at[l]);
       }
     }
   lanes(false);
   delete[] groups;
   delete[] pending;
+  delete[] at;
 }
 
 }  // namespace
@@ -914,13 +1015,20 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeChunk, RunChunk,
 extern "C" void reach_native_observe(const float* consts, const float* geometry, const float* fstate, float* x,
                                      int32_t* rows) {
   int r[2 * NCODE];
-  observe(consts, geometry, fstate, x, r);
+  observe(consts, geometry, fstate, trig(fstate + F_ARM), x, r);
   for (int k = 0; k < 2 * NCODE; ++k) rows[k] = r[k];
 }
 
 extern "C" void reach_native_arm_step(const float* consts, const float* s, const float* tau, const float* field,
                                       const float* force, float* out) {
-  arm_step(consts, s, tau, field, force, out);
+  ArmLanes<4> a;
+  float f[NF] = {};
+  std::memcpy(f + F_ARM, s, sizeof(float) * 4);
+  std::memcpy(f + F_FIELD, field, sizeof(float) * NFIELD);
+  std::memcpy(f + F_FORCE, force, sizeof(float) * 2);
+  for (int l = 0; l < 4; ++l) arm_in<4>(a, l, f, trig(s), tau);
+  arm_step<4>(consts, a);
+  for (int i = 0; i < 4; ++i) out[i] = a.moved[i][0];
 }
 
 extern "C" void reach_native_draws(const uint32_t* key, int32_t step, float* out) {
