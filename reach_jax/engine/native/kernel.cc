@@ -390,9 +390,22 @@ inline Arm lane_trig(const Trig<vf<W>>& a, int l) {
 }
 
 
+// The sensor's cells along the lanes of a vector: the NCELL floats at p, the other lanes 0 (nothing past p + NCELL is
+// read).
+static_assert(NCELL <= 8, "a row of the sensor's cells fits a vector of 8");
+inline v8 load_cells(const float* p) {
+#if defined(__AVX__)
+  return _mm256_maskload_ps(p, (__m256i)(vi<8>{0, 1, 2, 3, 4, 5, 6, 7} < NCELL));
+#else
+  v8 a = {};
+  for (int k = 0; k < NCELL; ++k) a[k] = p[k];
+  return a;
+#endif
+}
+
 // One sensor axis: the overlap of the cells [lo_k, hi_k] with [lo, hi].
-inline void overlap(const float* cell_lo, const float* cell_hi, float lo, float hi, float* o) {
-  for (int k = 0; k < NCELL; ++k) o[k] = xmax(0.0f, xmin(cell_hi[k], hi) - xmax(cell_lo[k], lo));
+inline v8 overlap(v8 cell_lo, v8 cell_hi, float lo, float hi) {
+  return vmax<8>(v8{}, vmin<8>(cell_hi, splat<8>(hi)) - vmax<8>(cell_lo, splat<8>(lo)));
 }
 
 // sensor.render in the learner's geometry g (`layout.pack_geometry`), then encoding.encode masked, and the coded
@@ -403,20 +416,19 @@ inline void observe(const float* c, const float* g, const float* f, const Arm& a
   hand_pos(c, at.c1, at.s1, at.c12, at.s12, hand);
   const float* tgt = f + F_TGT;
   const float half = g[G_HALF];
-  const float *xlo = g + G_XE, *ylo = g + G_YE, *xhi = g + G_XE_HI, *yhi = g + G_YE_HI;
+  const v8 xlo = load_cells(g + G_XE), ylo = load_cells(g + G_YE), xhi = load_cells(g + G_XE_HI),
+           yhi = load_cells(g + G_YE_HI);
   float both_lo[2] = {xmax(hand[0], tgt[0]) - half, xmax(hand[1], tgt[1]) - half};
   float both_hi[2] = {xmin(hand[0], tgt[0]) + half, xmin(hand[1], tgt[1]) + half};
-  float hx[NCELL], hy[NCELL], tx[NCELL], ty[NCELL], bx[NCELL], by[NCELL];
-  overlap(xlo, xhi, hand[0] - half, hand[0] + half, hx);
-  overlap(ylo, yhi, hand[1] - half, hand[1] + half, hy);
-  overlap(xlo, xhi, tgt[0] - half, tgt[0] + half, tx);
-  overlap(ylo, yhi, tgt[1] - half, tgt[1] + half, ty);
-  overlap(xlo, xhi, both_lo[0], both_hi[0], bx);
-  overlap(ylo, yhi, both_lo[1], both_hi[1], by);
+  const v8 hx = overlap(xlo, xhi, hand[0] - half, hand[0] + half), hy = overlap(ylo, yhi, hand[1] - half, hand[1] + half);
+  const v8 tx = overlap(xlo, xhi, tgt[0] - half, tgt[0] + half), ty = overlap(ylo, yhi, tgt[1] - half, tgt[1] + half);
+  const v8 bx = overlap(xlo, xhi, both_lo[0], both_hi[0]), by = overlap(ylo, yhi, both_lo[1], both_hi[1]);
   const float* mask = f + F_MASK;
-  for (int i = 0; i < NCELL; ++i)
-    for (int j = 0; j < NCELL; ++j)
-      x[i * NCELL + j] = ((hy[i] * hx[j] + ty[i] * tx[j]) - by[i] * bx[j]) * g[G_INV_AREA] * mask[i * NCELL + j];
+  for (int i = 0; i < NCELL; ++i) {  // row i of the cells, its columns in the lanes
+    float row[8];
+    store(row, ((hy[i] * hx + ty[i] * tx) - by[i] * bx) * g[G_INV_AREA] * load_cells(mask + i * NCELL));
+    std::memcpy(x + i * NCELL, row, sizeof(float) * NCELL);
+  }
   const float* parm = f + F_PARM;
   const float* ptau = f + F_PTAU;
   const float signal[NCODE] = {arm[0], arm[1], arm[2], arm[3], parm[0], parm[1], parm[2], parm[3], ptau[0], ptau[1]};
