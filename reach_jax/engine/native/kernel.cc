@@ -176,6 +176,7 @@ template <int W>
 struct Vec {
   typedef float f __attribute__((vector_size(4 * W)));
   typedef int32_t i __attribute__((vector_size(4 * W)));
+  typedef uint32_t u __attribute__((vector_size(4 * W)));
 };
 template <int W>
 using vf = typename Vec<W>::f;
@@ -670,11 +671,19 @@ inline void layer1_out(float* f, const float* x, const Rows& nz, const Rows& pnz
 
 // A step's uniform draws in [0, 1) (`random_stream.step_uniforms`): jax.random.uniform(fold_in(key, step), (NU,))
 // under threefry2x32 with partitionable bits, drawn one at a time as the step needs them, the same bits as JAX's.
-inline uint32_t rotl(uint32_t x, int r) { return (x << r) | (x >> (32 - r)); }
+// T: uint32_t, or vu<W> for W learners' draws at once.
+template <int W>
+using vu = typename Vec<W>::u;
 
-inline void threefry(uint32_t k0, uint32_t k1, uint32_t& x0, uint32_t& x1) {
+template <class T>
+inline T rotl(T x, int r) {
+  return (x << r) | (x >> (32 - r));
+}
+
+template <class T>
+inline void threefry(T k0, T k1, T& x0, T& x1) {
   static const int rot[2][4] = {{13, 15, 26, 6}, {17, 29, 16, 24}};
-  const uint32_t ks[3] = {k0, k1, k0 ^ k1 ^ 0x1BD11BDAu};
+  const T ks[3] = {k0, k1, k0 ^ k1 ^ 0x1BD11BDAu};
   x0 += ks[0];
   x1 += ks[1];
   for (int i = 0; i < 5; ++i) {
@@ -697,6 +706,24 @@ struct Draws {
     return bits(((b0 ^ b1) >> 9) | 0x3F800000u) - 1.0f;
   }
 };
+
+// Each lane's step draws (learner keys key0, key1 at step `step`) into d, and their first two, the exploration's,
+// into u.
+template <int W>
+inline void draw_lanes(vu<W> key0, vu<W> key1, vu<W> step, Draws* d, float (*u)[2]) {
+  vu<W> k0 = {}, k1 = step;
+  threefry<vu<W>>(key0, key1, k0, k1);
+  for (int j = 0; j < 2; ++j) {
+    vu<W> b0 = {}, b1 = vu<W>{} + static_cast<uint32_t>(j);
+    threefry<vu<W>>(k0, k1, b0, b1);
+    const vf<W> uj = (vf<W>)(((b0 ^ b1) >> 9) | 0x3F800000u) - 1.0f;
+    for (int m = 0; m < W; ++m) u[m][j] = uj[m];
+  }
+  for (int m = 0; m < W; ++m) {
+    d[m].k0 = k0[m];
+    d[m].k1 = k1[m];
+  }
+}
 
 inline bool touching(const float* g, const float* a, const float* b) {
   return std::fabs(a[0] - b[0]) < g[G_GHW] && std::fabs(a[1] - b[1]) < g[G_GHW];
@@ -767,8 +794,9 @@ struct Act {
   float tau[2], rnd[2], gain;
 };
 
-// exploration.value_scale, noise, actor_gain of one active learner in its geometry g, from x(t)'s outputs `out`.
-inline Act explore(const float* c, const float* f, const int* is, const Draws& u, const float* hy, const float* g,
+// exploration.value_scale, noise, actor_gain of one active learner in its geometry g, from x(t)'s outputs `out` and
+// the step's first two draws u.
+inline Act explore(const float* c, const float* f, const int* is, const float* u, const float* hy, const float* g,
                    const float* out) {
   const int full_at = is[I_FULLAT], trials = is[I_TRIALS], t = is[I_T];
   const float shortfall = 1.0f - f[F_DIST] * g[G_INV_CUR_HI];
@@ -791,7 +819,7 @@ inline Act explore(const float* c, const float* f, const int* is, const Draws& u
   Act act;
   for (int i = 0; i < 2; ++i) {
     const float carried = (silent ? 0.0f : corr) * f[F_PRND + i];
-    const float fresh = root * (2.0f * u.at(i) - 1.0f);
+    const float fresh = root * (2.0f * u[i] - 1.0f);
     act.rnd[i] = carried + fresh;
     const float tm = c[C_TAU_MAX + i];
     act.tau[i] = clip(c[C_TWO_TAU + i] * ((out[1 + i] + carried) + fresh), -tm, tm);
@@ -926,7 +954,8 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
   ArmLanes<W> arm;
   Act act[LANES];
   Draws draws[LANES];
-  float x[LANES][NIN], u1[LANES][H1], out[LANES][NO];
+  vu<W> key0 = {}, key1 = {}, step = {};
+  float x[LANES][NIN], u1[LANES][H1], out[LANES][NO], u[LANES][2];
   int rows[LANES][2 * NCODE];
   bool active[LANES];
   // Each group of learners takes every step of the call before the next group starts: learners never interact
@@ -941,10 +970,14 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
           arm_idle<W>(arm, m);
           continue;
         }
+        key0[m] = keys[2 * l];
+        key1[m] = keys[2 * l + 1];
+        step[m] = static_cast<uint32_t>(istate[l * NI + I_STEPS]);
         observe(consts, pf + l * npf + ncond * (NFIELD + NIN) + nb, fstate + l * NF, at[l], x[m], rows[m]);
         layer1_in<W>(fstate + l * NF, istate + l * NI, hyper + l * NH, x[m], rows[m], u1[m], nz[m], a, m);
       }
       lanes_step<W>(consts, groups[g], a);
+      draw_lanes<W>(key0, key1, step, draws, u);
       for (int m = 0; m < LANES; ++m) {
         if (!active[m]) continue;
         const int64_t l = g * LANES + m;
@@ -953,8 +986,7 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
         std::memcpy(f + F_PX, x[m], sizeof(float) * NIN);  // the pending step's x, now that layer 1 has its old one
         pending[l] = nz[m];
         for (int k = 0; k < NO; ++k) out[m][k] = a.out[k][m];
-        draws[m] = Draws(keys + 2 * l, istate[l * NI + I_STEPS]);
-        act[m] = explore(consts, f, istate + l * NI, draws[m], hyper + l * NH, pf + l * npf + ncond * (NFIELD + NIN) + nb,
+        act[m] = explore(consts, f, istate + l * NI, u[m], hyper + l * NH, pf + l * npf + ncond * (NFIELD + NIN) + nb,
                          out[m]);
         arm_in<W>(arm, m, f, at[l], act[m].tau);
       }
