@@ -22,26 +22,11 @@
 
 namespace {
 
-// llvm.maximum / llvm.minimum, which XLA emits for jnp.maximum / jnp.minimum: NaN wins, +0 > -0. Branch-free: of
-// equal values the bitwise and (or) picks +0 (-0) from a pair of zeros and leaves any other value as it is.
 inline uint32_t ubits(float f) {
   uint32_t u;
   std::memcpy(&u, &f, 4);
   return u;
 }
-inline float bits(uint32_t u);
-inline float xmax(float a, float b) {
-  float r = a > b ? a : b;
-  r = a == b ? bits(ubits(a) & ubits(b)) : r;
-  return a != a ? a : r;
-}
-inline float xmin(float a, float b) {
-  float r = a < b ? a : b;
-  r = a == b ? bits(ubits(a) | ubits(b)) : r;
-  return a != a ? a : r;
-}
-inline float clip(float x, float lo, float hi) { return xmin(xmax(x, lo), hi); }  // jnp.clip: max, then min
-
 inline float bits(uint32_t u) {
   float f;
   std::memcpy(&f, &u, 4);
@@ -206,8 +191,10 @@ template <int W>
 inline vf<W> sel(vi<W> m, vf<W> a, vf<W> b) {  // m: all ones (true) or zero per lane
   return m ? a : b;
 }
+// llvm.maximum / llvm.minimum, which XLA emits for jnp.maximum / jnp.minimum, per lane: NaN wins, +0 > -0. Of
+// equal values the bitwise and (or) picks +0 (-0) from a pair of zeros and leaves any other value as it is.
 template <int W>
-inline vf<W> vmax(vf<W> a, vf<W> b) {  // llvm.maximum per lane: NaN wins, +0 > -0
+inline vf<W> vmax(vf<W> a, vf<W> b) {
   vf<W> r = sel<W>(a > b, a, b);
   r = sel<W>(a == b, (vf<W>)((vi<W>)a & (vi<W>)b), r);
   return sel<W>(a != a, a, r);
@@ -218,6 +205,10 @@ inline vf<W> vmin(vf<W> a, vf<W> b) {
   r = sel<W>(a == b, (vf<W>)((vi<W>)a | (vi<W>)b), r);
   return sel<W>(a != a, a, r);
 }
+// One value's, in a vector's first lane: selects, where branches on the data would mispredict.
+inline float xmax(float a, float b) { return vmax<4>(vf<4>{a}, vf<4>{b})[0]; }
+inline float xmin(float a, float b) { return vmin<4>(vf<4>{a}, vf<4>{b})[0]; }
+inline float clip(float x, float lo, float hi) { return xmin(xmax(x, lo), hi); }  // jnp.clip: max, then min
 
 // Sines and cosines of theta1, theta1 + theta2, theta2: of one arm (float) or of W learners' (vf<W>).
 template <class T>
