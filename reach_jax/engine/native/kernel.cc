@@ -368,12 +368,11 @@ inline void arm_in(ArmLanes<W>& a, int l, const float* f, const Arm& at, const f
   a.at.c2[l] = at.c2;
 }
 
-// A lane with no learner: the arm at rest at 0, in no field.
+// A lane with no learner: the arm at rest at 0 (sin 0 = 0, cos 0 = 1), in no field.
 template <int W>
 inline void arm_idle(ArmLanes<W>& a, int l) {
   static const float zero[NF] = {};
-  const float tau[2] = {};
-  arm_in<W>(a, l, zero, trig(zero + F_ARM), tau);
+  arm_in<W>(a, l, zero, Arm{0.0f, 1.0f, 0.0f, 1.0f, 0.0f, 1.0f}, zero);
 }
 
 template <int W>
