@@ -1,8 +1,8 @@
 // The training step loop of reach_jax as one native CPU kernel: every learner of a device, a block of steps a call.
 //
 // It mirrors `engine/rollout.py`'s `budgeted_step` operation for operation, rounding as XLA:CPU does without fused
-// multiply-adds ("cpu-exact"): float32 throughout, the same libm calls (sinf, cosf, atan2f, powf), XLA's own
-// polynomial for exp, the same reduction order, and the rewrites XLA's simplifier makes (a division by a constant or
+// multiply-adds ("cpu-exact"): float32 throughout, the same libm calls (sinf, cosf, atan2f, powf; the arm's sinf and
+// cosf in vectors by glibc's own algorithm where it can, `sincos_n`), XLA's own polynomial for exp, the same reduction order, and the rewrites XLA's simplifier makes (a division by a constant or
 // by a broadcast scalar is a multiplication by its reciprocal). Units as in the Python: arm state [rad, rad/s],
 // torques [N m], positions [m], counts in steps or trials. Sizes are compile-time macros (`native.build`), every
 // physical constant is a run-time input (`consts`), so geometry can change without a rebuild.
@@ -1001,8 +1001,8 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
 // Steps `n_steps` steps of `n_learners` learners in place. keys: (n_learners, 2) the learners' threefry keys, whose
 // draws the kernel makes itself; pf / pi: each learner's plan (conditions, catch probabilities / ends, conditions,
 // learning).
-// Eight learners share the vector lanes of layers 2-3 (AVX), or four (SSE) when fewer: one lane a learner alone was
-// slower than four lanes, three of them idle.
+// Eight learners share the vector lanes of the arm and of layers 2-3 (AVX), or four (SSE) when fewer: one lane a
+// learner alone was slower than four lanes, three of them idle.
 extern "C" void reach_native_run(const float* consts, float* fstate, int32_t* istate, const float* hyper,
                                  const float* pf, const int32_t* pi, const uint32_t* keys, int64_t n_learners,
                                  int64_t n_steps, int64_t nb, int64_t ncond, int32_t budget) {
@@ -1045,7 +1045,8 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeChunk, RunChunk,
 #endif
 
 // Pieces of the step for the tests, each against its JAX function: the network input of a learner's packed state
-// (x (NIN,), rows (2 NCODE,)), one arm step, and a step's draws (NU,).
+// (x (NIN,), rows (2 NCODE,)), one arm step, the arm's sines and cosines of n floats (n a multiple of 4; against
+// libm's), and a step's draws (NU,).
 extern "C" void reach_native_observe(const float* consts, const float* geometry, const float* fstate, float* x,
                                      int32_t* rows) {
   int r[2 * NCODE];
@@ -1064,6 +1065,8 @@ extern "C" void reach_native_arm_step(const float* consts, const float* s, const
   arm_step<4>(consts, a);
   for (int i = 0; i < 4; ++i) out[i] = a.moved[i][0];
 }
+
+extern "C" void reach_native_sincos(const float* x, float* s, float* c, int32_t n) { sincos_n(x, s, c, n); }
 
 extern "C" void reach_native_draws(const uint32_t* key, int32_t step, float* out) {
   const Draws u(key, step);
