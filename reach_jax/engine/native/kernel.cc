@@ -2,8 +2,9 @@
 //
 // It mirrors `engine/rollout.py`'s `budgeted_step` operation for operation, rounding as XLA:CPU does without fused
 // multiply-adds ("cpu-exact"): float32 throughout, the same libm calls (sinf, cosf, atan2f, powf; the arm's sinf and
-// cosf in vectors by glibc's own algorithm where it can, `sincos_n`), XLA's own polynomial for exp, the same reduction order, and the rewrites XLA's simplifier makes (a division by a constant or
-// by a broadcast scalar is a multiplication by its reciprocal). Units as in the Python: arm state [rad, rad/s],
+// cosf in vectors by glibc's own algorithm where it can, `sincos_n`), XLA's own polynomial for exp, the same
+// reduction order, and the rewrites XLA's simplifier makes (a division by a constant or by a broadcast scalar is a
+// multiplication by its reciprocal). Units as in the Python: arm state [rad, rad/s],
 // torques [N m], positions [m], counts in steps or trials. Sizes are compile-time macros (`native.build`), every
 // physical constant is a run-time input (`consts`), so geometry can change without a rebuild.
 #include <cmath>
@@ -84,8 +85,10 @@ enum {
 static_assert(NH == NHYPER, "the kernel's hyperparameters are not layout.STEP_HYPERS");
 
 // sinf and cosf of n values (n a multiple of 4), the bits glibc's own gives on this CPU: its FMA variant
-// (__sinf_fma, __cosf_fma, __sincosf_fma of sysdeps/ieee754/flt-32, glibc 2.28 on) in vectors of 4 lanes where
-// the CPU has FMA and AVX2, as glibc's ifunc picks it, and the libm calls one value at a time elsewhere.
+// (__sinf_fma, __cosf_fma, __sincosf_fma of sysdeps/ieee754/flt-32, read from glibc 2.36's build) in vectors of 4
+// lanes where the CPU has FMA and AVX2, as glibc's ifunc picks it, and the libm calls one value at a time elsewhere.
+// Equal to glibc 2.36's sinf, cosf and sincosf on every float of [-130, 130]; tests/test_native.py holds it against
+// the machine's libm.
 void sincos_libm(const float* x, float* s, float* c, int n) {
   for (int i = 0; i < n; ++i) {
     s[i] = sinf(x[i]);
@@ -380,7 +383,6 @@ inline Arm lane_trig(const Trig<vf<W>>& a, int l) {
   return {a.s1[l], a.c1[l], a.s12[l], a.c12[l], a.s2[l], a.c2[l]};
 }
 
-
 // The sensor's cells along the lanes of a vector: the NCELL floats at p, the other lanes 0 (nothing past p + NCELL is
 // read).
 static_assert(NCELL <= 8, "a row of the sensor's cells fits a vector of 8");
@@ -411,7 +413,8 @@ inline void observe(const float* c, const float* g, const float* f, const Arm& a
            yhi = load_cells(g + G_YE_HI);
   float both_lo[2] = {xmax(hand[0], tgt[0]) - half, xmax(hand[1], tgt[1]) - half};
   float both_hi[2] = {xmin(hand[0], tgt[0]) + half, xmin(hand[1], tgt[1]) + half};
-  const v8 hx = overlap(xlo, xhi, hand[0] - half, hand[0] + half), hy = overlap(ylo, yhi, hand[1] - half, hand[1] + half);
+  const v8 hx = overlap(xlo, xhi, hand[0] - half, hand[0] + half);
+  const v8 hy = overlap(ylo, yhi, hand[1] - half, hand[1] + half);
   const v8 tx = overlap(xlo, xhi, tgt[0] - half, tgt[0] + half), ty = overlap(ylo, yhi, tgt[1] - half, tgt[1] + half);
   const v8 bx = overlap(xlo, xhi, both_lo[0], both_hi[0]), by = overlap(ylo, yhi, both_lo[1], both_hi[1]);
   const float* mask = f + F_MASK;
