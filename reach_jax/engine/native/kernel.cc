@@ -401,10 +401,65 @@ inline v8 overlap(v8 cell_lo, v8 cell_hi, float lo, float hi) {
   return vmax<8>(v8{}, vmin<8>(cell_hi, splat<8>(hi)) - vmax<8>(cell_lo, splat<8>(lo)));
 }
 
+// The input codes (`encoding`), one a lane of vectors of 8 (GCC would lower a vector of 16 lane by lane, with
+// branches): their ranges, 1 / step, last first unit (units - 2), units, offsets in x.
+constexpr int NCV = (NCODE + 7) / 8;
+struct Codes {
+  v8 lo[NCV], hi[NCV], inv_step[NCV];
+  vi<8> last[NCV];
+  int units[NCODE], off[NCODE];
+};
+
+inline Codes codes(const float* c) {
+  Codes k = {};
+  for (int i = 0; i < NCODE; ++i) {
+    const float* e = c + C_ENC + 5 * i;  // lo, hi, 1 / step, units, offset
+    k.lo[i / 8][i % 8] = e[0];
+    k.hi[i / 8][i % 8] = e[1];
+    k.inv_step[i / 8][i % 8] = e[2];
+    k.units[i] = static_cast<int>(e[3]);
+    k.last[i / 8][i % 8] = k.units[i] - 2;
+    k.off[i] = static_cast<int>(e[4]);
+  }
+  return k;
+}
+
+// encoding.encode masked, the codes in lanes, into x and the coded support rows.
+inline void encode(const Codes& k, const float* f, float* x, int* rows) {
+  typedef vi<8> I;
+  static_assert(F_PARM == F_ARM + 4 && F_PTAU == F_PARM + 4 && NCODE == 10, "the signals lie in order in f");
+  float signal[8 * NCV] = {}, u0[8 * NCV], u1[8 * NCV];
+  int first[8 * NCV];
+  std::memcpy(signal, f + F_ARM, sizeof(float) * NCODE);  // the arm, its previous state, the previous torques
+  for (int v = 0; v < NCV; ++v) {
+    const v8 pos = (vmin<8>(vmax<8>(load(signal + 8 * v), k.lo[v]), k.hi[v]) - k.lo[v]) * k.inv_step[v];
+    // int(floor(pos)) clamped to [0, units - 2]: truncation differs from floor only below 0, which the clamp makes 0
+    // (and NaN converts to INT_MIN either way).
+    I i0 = __builtin_convertvector(pos, I);
+    i0 = i0 < 0 ? I{} : (i0 > k.last[v] ? k.last[v] : i0);
+    const I magnitude = I{} + 0x7fffffff;  // fabs: the sign bit cleared
+    const v8 d0 = (v8)((I)(pos - __builtin_convertvector(i0, v8)) & magnitude);
+    const v8 d1 = (v8)((I)(pos - __builtin_convertvector(i0 + 1, v8)) & magnitude);
+    store(u0 + 8 * v, vmax<8>(v8{}, 1.0f - d0));
+    store(u1 + 8 * v, vmax<8>(v8{}, 1.0f - d1));
+    std::memcpy(first + 8 * v, &i0, sizeof i0);
+  }
+  const float* mask = f + F_MASK;
+  for (int c = 0; c < NCODE; ++c) {
+    // Every unit but the two neighbours of pos is max(0, 1 - |pos - i|) = +0 exactly (`encoding.localize_support`).
+    for (int i = 0; i < k.units[c]; ++i) x[k.off[c] + i] = 0.0f;
+    const int i = k.off[c] + first[c];
+    x[i] = u0[c] * mask[i];
+    x[i + 1] = u1[c] * mask[i + 1];
+    rows[2 * c] = i;
+    rows[2 * c + 1] = i + 1;
+  }
+}
+
 // sensor.render in the learner's geometry g (`layout.pack_geometry`), then encoding.encode masked, and the coded
-// support rows: x (NIN,), rows (2 * NCODE,). at: the trig of the learner's arm.
-inline void observe(const float* c, const float* g, const float* f, const Arm& at, float* x, int* rows) {
-  const float* arm = f + F_ARM;
+// support rows: x (NIN,), rows (2 * NCODE,). at: the trig of the learner's arm; k: the codes.
+inline void observe(const float* c, const Codes& k, const float* g, const float* f, const Arm& at, float* x,
+                    int* rows) {
   float hand[2];
   hand_pos(c, at.c1, at.s1, at.c12, at.s12, hand);
   const float* tgt = f + F_TGT;
@@ -423,22 +478,7 @@ inline void observe(const float* c, const float* g, const float* f, const Arm& a
     store(row, ((hy[i] * hx + ty[i] * tx) - by[i] * bx) * g[G_INV_AREA] * load_cells(mask + i * NCELL));
     std::memcpy(x + i * NCELL, row, sizeof(float) * NCELL);
   }
-  const float* parm = f + F_PARM;
-  const float* ptau = f + F_PTAU;
-  const float signal[NCODE] = {arm[0], arm[1], arm[2], arm[3], parm[0], parm[1], parm[2], parm[3], ptau[0], ptau[1]};
-  for (int k = 0; k < NCODE; ++k) {
-    const float* e = c + C_ENC + 5 * k;  // lo, hi, 1 / step, units, offset
-    int n = static_cast<int>(e[3]), off = static_cast<int>(e[4]);
-    float pos = (clip(signal[k], e[0], e[1]) - e[0]) * e[2];
-    int first = static_cast<int>(std::floor(pos));
-    first = first < 0 ? 0 : (first > n - 2 ? n - 2 : first);
-    // Every unit but the two neighbours of pos is max(0, 1 - |pos - i|) = +0 exactly (`encoding.localize_support`).
-    for (int i = 0; i < n; ++i) x[off + i] = 0.0f;
-    for (int i = first; i < first + 2; ++i)
-      x[off + i] = xmax(0.0f, 1.0f - std::fabs(pos - static_cast<float>(i))) * mask[off + i];
-    rows[2 * k] = off + first;
-    rows[2 * k + 1] = off + first + 1;
-  }
+  encode(k, f, x, rows);
 }
 
 // floor per lane: one rounding instruction where the target has it (floor is exact, so any route gives the same bits).
@@ -940,6 +980,7 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
     for (int i = 0; i < NIN; ++i)
       if (fstate[l * NF + F_PX + i] != 0.0f) pending[l].at[pending[l].n++] = i;
   }
+  const Codes enc = codes(consts);
   Arm* at = new Arm[n_learners];  // the trig of each learner's arm, kept from step to step
   for (int64_t l = 0; l < n_learners; ++l) at[l] = trig(fstate + l * NF + F_ARM);
   Rows nz[LANES];
@@ -966,7 +1007,7 @@ void run(const float* consts, float* fstate, int32_t* istate, const float* hyper
         key0[m] = keys[2 * l];
         key1[m] = keys[2 * l + 1];
         step[m] = static_cast<uint32_t>(istate[l * NI + I_STEPS]);
-        observe(consts, pf + l * npf + ncond * (NFIELD + NIN) + nb, fstate + l * NF, at[l], x[m], rows[m]);
+        observe(consts, enc, pf + l * npf + ncond * (NFIELD + NIN) + nb, fstate + l * NF, at[l], x[m], rows[m]);
         layer1_in<W>(fstate + l * NF, istate + l * NI, hyper + l * NH, x[m], rows[m], u1[m], nz[m], a, m);
       }
       lanes_step<W>(consts, groups[g], a);
@@ -1053,7 +1094,7 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(ReachNativeChunk, RunChunk,
 extern "C" void reach_native_observe(const float* consts, const float* geometry, const float* fstate, float* x,
                                      int32_t* rows) {
   int r[2 * NCODE];
-  observe(consts, geometry, fstate, trig(fstate + F_ARM), x, r);
+  observe(consts, codes(consts), geometry, fstate, trig(fstate + F_ARM), x, r);
   for (int k = 0; k < 2 * NCODE; ++k) rows[k] = r[k];
 }
 
