@@ -402,12 +402,12 @@ inline v8 overlap(v8 cell_lo, v8 cell_hi, float lo, float hi) {
 }
 
 // The input codes (`encoding`), one a lane of vectors of 8 (GCC would lower a vector of 16 lane by lane, with
-// branches): their ranges, 1 / step, last first unit (units - 2), units, offsets in x.
+// branches): their ranges, 1 / step, last first unit (units - 2), offsets in x.
 constexpr int NCV = (NCODE + 7) / 8;
 struct Codes {
   v8 lo[NCV], hi[NCV], inv_step[NCV];
   vi<8> last[NCV];
-  int units[NCODE], off[NCODE];
+  int off[NCODE];
 };
 
 inline Codes codes(const float* c) {
@@ -417,8 +417,7 @@ inline Codes codes(const float* c) {
     k.lo[i / 8][i % 8] = e[0];
     k.hi[i / 8][i % 8] = e[1];
     k.inv_step[i / 8][i % 8] = e[2];
-    k.units[i] = static_cast<int>(e[3]);
-    k.last[i / 8][i % 8] = k.units[i] - 2;
+    k.last[i / 8][i % 8] = static_cast<int>(e[3]) - 2;
     k.off[i] = static_cast<int>(e[4]);
   }
   return k;
@@ -436,7 +435,8 @@ inline void encode(const Codes& k, const float* f, float* x, int* rows) {
     // int(floor(pos)) clamped to [0, units - 2]: truncation differs from floor only below 0, which the clamp makes 0
     // (and NaN converts to INT_MIN either way).
     I i0 = __builtin_convertvector(pos, I);
-    i0 = i0 < 0 ? I{} : (i0 > k.last[v] ? k.last[v] : i0);
+    i0 = i0 > k.last[v] ? k.last[v] : i0;  // min, then max with 0: the same as the other way for units >= 2
+    i0 = i0 < 0 ? I{} : i0;
     const I magnitude = I{} + 0x7fffffff;  // fabs: the sign bit cleared
     const v8 d0 = (v8)((I)(pos - __builtin_convertvector(i0, v8)) & magnitude);
     const v8 d1 = (v8)((I)(pos - __builtin_convertvector(i0 + 1, v8)) & magnitude);
@@ -445,9 +445,10 @@ inline void encode(const Codes& k, const float* f, float* x, int* rows) {
     std::memcpy(first + 8 * v, &i0, sizeof i0);
   }
   const float* mask = f + F_MASK;
+  // Every unit but the two neighbours of pos is max(0, 1 - |pos - i|) = +0 exactly (`encoding.localize_support`),
+  // and the codes' units fill x after the cells (`layout.constants`).
+  std::memset(x + NVIS, 0, sizeof(float) * (NIN - NVIS));
   for (int c = 0; c < NCODE; ++c) {
-    // Every unit but the two neighbours of pos is max(0, 1 - |pos - i|) = +0 exactly (`encoding.localize_support`).
-    for (int i = 0; i < k.units[c]; ++i) x[k.off[c] + i] = 0.0f;
     const int i = k.off[c] + first[c];
     x[i] = u0[c] * mask[i];
     x[i + 1] = u1[c] * mask[i + 1];
