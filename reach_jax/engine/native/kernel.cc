@@ -148,10 +148,25 @@ __attribute__((target("avx2,fma"))) void sincos_fma(const float* x, float* s, fl
 #endif
 
 typedef void (*SinCos)(const float*, float*, float*, int);
+
+// Whether `f` gives this libm's bits on a spread of SAMPLES floats of [-130, 130] (both reduction paths, the
+// quadrants, the tiny and the slow inputs): a glibc whose sinf rounds otherwise keeps the libm calls.
+constexpr int SAMPLES = 4096;
+bool agrees_with_libm(SinCos f) {
+  float x[SAMPLES], s[SAMPLES], c[SAMPLES];
+  for (int i = 0; i < SAMPLES; ++i) x[i] = -130.0f + 260.0f * (static_cast<float>(i) + 0.37f) / SAMPLES;
+  x[0] = 1e-5f, x[1] = -0.7f, x[2] = 121.5f, x[3] = -0.0f;
+  f(x, s, c, SAMPLES);
+  for (int i = 0; i < SAMPLES; ++i)
+    if (ubits(s[i]) != ubits(sinf(x[i])) || ubits(c[i]) != ubits(cosf(x[i]))) return false;
+  return true;
+}
+
 SinCos pick_sincos() {
 #if defined(__x86_64__)
   __builtin_cpu_init();
-  if (__builtin_cpu_supports("fma") && __builtin_cpu_supports("avx2")) return sincos_fma;
+  if (__builtin_cpu_supports("fma") && __builtin_cpu_supports("avx2") && agrees_with_libm(sincos_fma))
+    return sincos_fma;
 #endif
   return sincos_libm;
 }
