@@ -149,8 +149,10 @@ def _variants(ax, pts: list[dict], key: str, label: str) -> None:
     for c in dict.fromkeys(tuple(p["centre_m"]) for p in others):
         at = [base[c]] if c in base else []
         for p in at + [q for q in others if tuple(q["centre_m"]) == c]:
-            what = "today's" if _is_base(p) else (
-                f"bound {p['noise']:g}" if np.isclose(p["cell_m"], BASE_CELL) else f"cell {p['cell_m']:.3f}"
+            what = (
+                "today's"
+                if _is_base(p)
+                else (f"bound {p['noise']:g}" if np.isclose(p["cell_m"], BASE_CELL) else f"cell {p['cell_m']:.3f}")
             )
             names.append(f"({c[0]:+.3f}, {c[1]:.2f}) {what}")
             values.append(_value(p, key))
