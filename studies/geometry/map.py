@@ -100,9 +100,9 @@ def markdown(pts: list[dict], found: dict, command: str) -> str:
         f"# The geometry map, frame {FRAME}",
         "",
         f"Made by `{command}`. One row per visual field and recipe, lowest D first: D in points from the paper's "
-        "Table 2, the paper's cells plausible as a two-network draw from ours (– where a condition has too few networks "
-        "for it), the claims that hold, the unexpected "
-        "field's cell (none → field success / out %, and the % of its movements that end folded on the elbow stop), "
+        "Table 2, the paper's cells plausible as a two-network draw from ours (– where a condition has too few "
+        "networks for it), the claims that hold, the unexpected field's cell (none → field success / out %, and the "
+        "% of its movements that end folded on the elbow stop), "
         "the no-field networks' learned damping along the field's pushing axis [N s/m] (the passive arm's), the "
         "stable learners and the collapsed networks.",
         "",
