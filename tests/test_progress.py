@@ -186,8 +186,10 @@ FINISHED_RUNS = committed_runs()  # those still training, or stopped early (dev_
 # Where the truth strays from the estimate by more than the band for long, for reasons the trial lengths before it
 # do not show: dev_delayed's anneal to half the noise lengthens its trials after mid-run (the truth 30-40% over the
 # estimate from 25% to 75% of the run: inside the band in 73% of the updates), dev_gradual's trials lengthen in its
-# second quarter (+30-39%: 82%), and a late setback in dev_gain_mid (+93% from 75% to 90%: 43%).
-BAND_MISSES = {"dev_delayed", "dev_gradual", "dev_gain_mid"}
+# second quarter (+30-39%: 82%), and a late setback in dev_gain_mid (+93% from 75% to 90%: 43%). In geometry_map
+# every miss is in the last quarter, in its tail of 8 and then 4 learners, whose trials keep shortening: the truth
+# 35-51% under the estimate (inside the band in 84% of the updates from a quarter of the run).
+BAND_MISSES = {"dev_delayed", "dev_gradual", "dev_gain_mid", "geometry_map"}
 
 
 @pytest.mark.parametrize(
