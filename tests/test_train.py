@@ -22,6 +22,7 @@ from reach_jax.config import (
     TaskConfig,
     TrainConfig,
     compat,
+    from_partial,
     hyper,
     n_inputs,
     n_past_inputs,
@@ -572,3 +573,29 @@ def test_cli_run_writes_config_metrics_and_checkpoints(tmp_path, capsys):
     )
     assert train_cli.main([*argv, "--out", str(out), "--quiet"]) == errors.EXIT_USAGE
     assert "--resume" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_the_compiled_fresh_batch_is_the_op_by_op_one_bit_for_bit():
+    # Every run before the fresh batch was compiled began from the op-by-op one; a batch of every kind of learner
+    # (each condition, a protocol, two seeds, moved and scaled visual fields) must begin from the same bits.
+    cfg = from_partial(
+        {
+            "train": {
+                "trials": 45_000,  # the adaptation protocol's length
+                "seeds": 2,
+                "protocols": ["adaptation"],
+                "zip_grids": True,
+                "sensor_dx_grid": [0.0, 0.15],
+                "sensor_scale_grid": [1.0, 0.75],
+            }
+        }
+    )
+    compiled = batch.fresh_states(cfg)
+    with jax.disable_jit():
+        op_by_op = batch.fresh_states(cfg)
+    assert len(jax.tree.leaves(compiled)) == len(jax.tree.leaves(op_by_op))
+    for a, b in zip(jax.tree.leaves(compiled), jax.tree.leaves(op_by_op), strict=True):
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.dtype == b.dtype and a.shape[0] == 20  # 5 names x 2 grid points x 2 seeds
+        np.testing.assert_array_equal(a.view(np.uint8), b.view(np.uint8))

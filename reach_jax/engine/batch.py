@@ -7,6 +7,7 @@ A learner's place in the batch is fixed by the config: conditions, then sweep po
 from __future__ import annotations
 
 import dataclasses
+import functools
 import itertools
 import math
 from typing import NamedTuple
@@ -94,14 +95,21 @@ def plans(cfg: Config) -> protocol.Plan:
 
 
 def fresh_states(cfg: Config, plan: protocol.Plan | None = None) -> learner_state.LearnerState:
-    """Every learner's first state, learner axis first: run op by op (not compiled) as every run has begun.
+    """Every learner's first state, learner axis first: compiled as one program, bit for bit what runs begun before
+    that got op by op (tests/test_train.py), and seconds sooner.
 
     Args:
       cfg: the run's config.
       plan: `plans(cfg)`, when the caller has it.
     """
     keys = jnp.stack([learner_key(cfg.train.seed, s) for _, s in learner_table(cfg.train)])
-    return jax.vmap(lambda k, p: learner_state.init_learner(k, p, cfg))(keys, plans(cfg) if plan is None else plan)
+    return _init_learners(keys, plans(cfg) if plan is None else plan, cfg)
+
+
+@functools.partial(jax.jit, static_argnames="cfg")
+def _init_learners(keys: jax.Array, plan: protocol.Plan, cfg: Config) -> learner_state.LearnerState:
+    """`learner_state.init_learner` of every learner: keys (L, 2) and plan's leaves learner axis first."""
+    return jax.vmap(lambda k, p: learner_state.init_learner(k, p, cfg))(keys, plan)
 
 
 def init_batch(cfg: Config) -> Batch:

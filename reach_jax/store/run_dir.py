@@ -231,9 +231,8 @@ def _state_shapes(cfg: Config, x64: bool) -> learner_state.LearnerState:
 def added_state_defaults(cfg: Config) -> dict[str, np.ndarray]:
     """The leaves of a fresh batch that older checkpoints lack (`compat.ADDED_STATE_FIELDS`), keyed as stored.
 
-    One compiled program keeps just these leaves, so the batch is never built: they are copies of the config's
-    conditions and blocks, and constants, bit for bit what `batch.fresh_states` gives them, where building every
-    learner op by op takes about 10 s a batch shape.
+    One compiled program keeps just these leaves: copies of the config's conditions and blocks, and constants, bit
+    for bit what `batch.fresh_states` gives them.
     """
 
     def added():
