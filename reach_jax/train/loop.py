@@ -29,18 +29,20 @@ from reach_jax.train.prepare import Prepared, begin, prepare
 from reach_jax.train.sinks import CheckpointSink, MetricsSink, ProgressSink, Sink
 
 
-def dispatch(run_chunk, group: batch.Batch, states, members: np.ndarray, budget, device_states=None):
-    """Start a chunk on the learners `members` of the host `states`; `device_states`, if given, holds exactly them."""
+def member_inputs(group: batch.Batch, members: np.ndarray) -> tuple:
+    """The plans and hypers of the learners `members`: the batch's own objects while every learner runs, so that the
+    chunk places them on its devices once (`make_chunk`)."""
+    if len(members) == len(jax.tree.leaves(group.hypers)[0]):
+        return group.plans, group.hypers
+    return jax.tree.map(lambda a: np.asarray(a)[members], (group.plans, group.hypers))
 
-    def pick(a):
-        return np.asarray(a)[members]
 
-    plans, hypers = group.plans, group.hypers
-    if len(members) < len(np.asarray(states.env.trials)):
-        plans, hypers = jax.tree.map(pick, plans), jax.tree.map(pick, hypers)
+def dispatch(run_chunk, inputs: tuple, states, members: np.ndarray, budget, device_states=None):
+    """Start a chunk on the learners `members` of the host `states`, with their plans and hypers `inputs`
+    (`member_inputs`); `device_states`, if given, holds exactly those learners."""
     if device_states is None:
-        device_states = jax.tree.map(pick, states)
-    return run_chunk(device_states, plans, hypers, budget)
+        device_states = jax.tree.map(lambda a: np.asarray(a)[members], states)
+    return run_chunk(device_states, *inputs, budget)
 
 
 def numerics_error(ok: np.ndarray, prep: Prepared, chunk: int) -> NumericsError:
@@ -64,12 +66,13 @@ def chunks(prep: Prepared, group: batch.Batch, devices=None, stop: interrupt.Sto
     stop = interrupt.Stop() if stop is None else stop
     budget = prep.cfg.train.trials
     run_chunk = make_chunk(prep.cfg, prep.cfg.train.chunk_steps, devices, prep.speed)
-    start = functools.partial(dispatch, run_chunk, group, budget=jnp.asarray(budget, jnp.int32))
+    start = functools.partial(dispatch, run_chunk, budget=jnp.asarray(budget, jnp.int32))
     states, index, running, asked = jax.device_get(group.states), prep.chunk, None, None
     members = chunk_members(np.asarray(states.env.trials), budget)
     if len(members):
         whole = len(members) == len(np.asarray(states.env.trials))
-        running = start(states, members, device_states=group.states if whole else None)
+        inputs = member_inputs(group, members)
+        running = start(inputs, states, members, device_states=group.states if whole else None)
     while running is not None:
         # The chunk's learners on this process (an all-gather across hosts with --multihost), copied to the host,
         # put back among the rest; learners outside the chunk ended no trial in it.
@@ -84,9 +87,10 @@ def chunks(prep: Prepared, group: batch.Batch, devices=None, stop: interrupt.Sto
         # Dispatch the next chunk before this one is logged and saved, so the devices never wait for the disk;
         # the devices already hold its learners unless the batch shrinks. After a stop signal, dispatch none.
         if ok.all() and len(following) and asked is None:
-            reuse = finished if np.array_equal(following, members) else None
+            same = np.array_equal(following, members)
+            reuse, inputs = (finished, inputs) if same else (None, member_inputs(group, following))
             members = following
-            running = start(states, members, device_states=reuse)
+            running = start(inputs, states, members, device_states=reuse)
         if not ok.all():
             raise numerics_error(ok, prep, index)
         yield Finished(index, states, records, ran)
