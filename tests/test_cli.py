@@ -86,11 +86,11 @@ def test_describe_words_a_recipe_from_the_table_naming_only_what_is_set_and_on()
     # Every entry has its words, and a part of a form is named only while that form is on.
     assert all(h.words for h in hyper.TABLE)
     assert all(h.part_of in hyper.BY_NAME and h.part_of != h.name for h in hyper.TABLE if h.part_of)
-    assert hyper.describe({}) == "bound 0.2"
+    assert hyper.describe({}) == "bound 0.25"
     # Float32 values, as a batch stores them, print as their float32 shortest.
     label = {"noise": 0.2, "lr": 1.0, "noise_value_ratio": np.float32(0.5), "drift_gate": np.float32(0.3)}
     assert hyper.describe(label) == "bound 0.2; ×0.5 near the goal; drift only above 0.3 recent failure"
-    # Versions 8 and 11 had today's recipe (constant exploration): nothing more is said against their defaults.
+    # Versions 8 and 11 had today's recipe but its bound, which is always said: nothing more against their defaults.
     today = hyper.describe(label)
     assert hyper.describe(label, hyper.defaults(8)) == hyper.describe(label, hyper.defaults(11)) == today
     # Against the defaults of another time (versions 9 and 13: lr 1.6), what differed from them is said, and no more.

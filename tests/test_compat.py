@@ -106,11 +106,14 @@ def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_
     for section, fields in before_12.items():
         for name, value in fields.items():
             assert getattr(getattr(cfg, section), name) == value != getattr(getattr(old_config, section), name), name
-    today = hyper.defaults()
-    assert hyper.defaults(8) == hyper.defaults(10) == hyper.defaults(11) == {**today, **before_12["learner"]} == today
+    today, constant = hyper.defaults(), hyper.defaults(15)  # version 16 raised the bound alone
+    assert constant == {**today, "noise": 0.2} != today
+    assert (
+        hyper.defaults(8) == hyper.defaults(10) == hyper.defaults(11) == {**today, **before_12["learner"]} == constant
+    )
     assert hyper.defaults(9) == {**today, **pick["learner"], "actor_target_bound": 0.0}
     assert hyper.defaults(12) == hyper.defaults(13) == {**hyper.defaults(9), "actor_target_bound": 0.45}
-    assert hyper.defaults(13) != today and hyper.defaults(14) == today
+    assert hyper.defaults(13) != constant and hyper.defaults(14) == constant
     stored = {**to_dict(Config(learner=LearnerConfig(**pick["learner"]))), "version": 9}  # complete: its values stand
     assert from_dict(stored).learner == LearnerConfig(**pick["learner"])
     del stored["learner"]["lr"]
@@ -124,7 +127,7 @@ def test_before_version_9_a_missing_field_whose_default_changed_reads_as_it_was_
 )
 def test_a_named_recipe_is_an_earlier_default_one_config_away(recipe, version):
     """recipes/round4_pick.json spells config version 9's default recipe, recipes/constant_exploration.json that of
-    versions 10-11 (and 1-8, and 14 on) and recipes/clipped_pick.json that of versions 12-13: the values
+    versions 10-11 (and 1-8, and 14-15) and recipes/clipped_pick.json that of versions 12-13: the values
     `CHANGED_DEFAULTS` holds."""
     data = read_config_file(Path(__file__).resolve().parents[1] / "recipes" / f"{recipe}.json")
     assert "comment" not in data  # read and dropped
@@ -146,7 +149,7 @@ def test_a_current_config_that_lacks_a_field_is_an_error_naming_it(section, fiel
     blocks = {**to_dict(Config()), "protocols": {"p": [{"trials": 5, "condition": "none"}]}}
     with pytest.raises(ValueError, match=r"^protocols.p\[0\].catch: missing"):
         from_dict(blocks)
-    expected = "1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14 or 15"
+    expected = "1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15 or 16"
     with pytest.raises(ValueError, match=f"^version: expected {expected}, found 0"):
         from_dict({**to_dict(Config()), "version": 0})
 
@@ -187,6 +190,21 @@ def test_before_version_14_the_field_trains_and_is_judged_in_the_frame_as_applie
     as_applied = dataclasses.replace(today, train=dataclasses.replace(today.train, conditions=CONDITIONS))
     stored = {**to_dict(as_applied), "version": 13}
     assert from_dict(stored) == as_applied
+
+
+def test_before_version_16_the_exploration_bound_is_0_2():
+    """Version 16 raised the exploration bound to 0.25 (issue 62's held-out pick); a version-1 config that left the
+    bound out trained with 0.2, and a stored config of version 15, which holds it, reads as stored."""
+    assert Config().learner.noise == 0.25 and compat.CHANGED_DEFAULTS[16] == {"learner": {"noise": 0.2}}
+    partial = {**to_dict(Config()), "version": 1}
+    del partial["learner"]["noise"]
+    assert from_dict(partial).learner.noise == 0.2
+    assert from_dict({**to_dict(Config()), "version": 15}) == Config()
+    assert from_partial({"learner": {"lr": 1.0}}).learner.noise == 0.25  # a partial file takes today's defaults
+    recipe = checked_config(
+        read_config_file(Path(__file__).resolve().parents[1] / "recipes" / "constant_exploration.json")
+    )
+    assert {n: getattr(recipe.learner, n) for n in hyper.NAMES} == hyper.defaults(15)  # versions 14-15's recipe
 
 
 LEVERS_6 = ("actor_signal_gain", "drift_gate", "drift_gate_trials", "n_max_clean")  # hyperparameters of version 6

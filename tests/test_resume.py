@@ -36,8 +36,8 @@ from reach_jax.store import checkpoint, run_lock
 from reach_jax.store import run_dir as run_dir_io
 from reach_jax.train import cli as train_cli
 
-# A run of four chunks of one learner (its three trials take 4 x 70 steps at today's defaults).
-SHORT, SHORT_CHUNKS = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "70"], 4
+# A run of five chunks of one learner (its three trials end in the fifth 70-step chunk at today's defaults).
+SHORT, SHORT_CHUNKS = ["--trials", "3", "--seeds", "1", "--conditions", "none", "--chunk-steps", "70"], 5
 
 
 def cfg_of(argv) -> Config:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 CHECKPOINT_VERSION = 3  # 3: the trial, its condition and block, the curriculum and the trial count under `env`
 READABLE_CHECKPOINTS = (2, 3)
-READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)  # `config.CONFIG_VERSION` is the last
+READABLE_CONFIGS = (1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16)  # `config.CONFIG_VERSION` is the last
 FIRST_COMPLETE_CONFIG = 2  # from version 2 on a stored config holds every field of its version
 
 # Fields added with a config version, each at the value that keeps the runs of the versions before it unchanged.
@@ -94,7 +94,9 @@ _CLIPPED_PICK = {**_ROUND4_PICK, "learner": {**_ROUND4_PICK["learner"], "actor_t
 # the elbow stop the paper's one link (model §1); a version-1 config trained with the clamp. Version 14 trains and
 # judges the paper's field mirrored by default, with the constant-exploration recipe, by issue 56's adoption rule
 # (studies/frame/verdict.md): before it, the field's learners and the adaptation protocol's field block trained in the
-# frame as applied, which the first frame judged, with the clipped pick (`recipes/clipped_pick.json`).
+# frame as applied, which the first frame judged, with the clipped pick (`recipes/clipped_pick.json`). Version 16
+# raised the exploration bound from 0.2 to 0.25, by issue 62's adoption rule (studies/geometry/verdict.md); the
+# recipe of versions 14-15 is `recipes/constant_exploration.json`.
 CHANGED_DEFAULTS = {
     9: _CONSTANT_EXPLORATION,
     10: _ROUND4_PICK,
@@ -112,6 +114,7 @@ CHANGED_DEFAULTS = {
             ]
         },
     },
+    16: {"learner": {"noise": 0.2}},
 }
 
 # Config fields that older runs stored and that no longer belong to the config: speed knobs, which do not change

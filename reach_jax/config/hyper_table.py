@@ -17,8 +17,8 @@ TABLE = (
     ),
     Hyperparameter(
         "noise",
-        0.2,
-        "exploration bound b of rnd ~ U(-b, b) in actor units (model §11 choice; issue 56's held-out pick)",
+        0.25,
+        "exploration bound b of rnd ~ U(-b, b) in actor units (model §11 choice; issue 62's held-out pick)",
         words="bound {v:g}",
     ),
     Hyperparameter(

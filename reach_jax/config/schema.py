@@ -22,9 +22,9 @@ from reach_jax.config.tables import (
     ProtocolConfig,
 )
 
-# A stored config holds every field; versions 3-8, 11, 13 and 15 added fields, 9-10 and 12-14 changed defaults
+# A stored config holds every field; versions 3-8, 11, 13 and 15 added fields, 9-10, 12-14 and 16 changed defaults
 # (`compat`).
-CONFIG_VERSION = 15
+CONFIG_VERSION = 16
 
 
 @dataclass(frozen=True)
