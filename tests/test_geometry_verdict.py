@@ -41,3 +41,30 @@ def test_nothing_is_adopted_unless_every_condition_holds(load_tool, change):
     got = verdict.decide([point((-0.05, 0.37), 20.0), point((0.10, 0.45), d, **change)])
     assert got["adopted"] is None and got["candidates"][0]["fails"]
     assert "No candidate qualifies" in verdict.markdown(got, "cmd")
+
+
+def test_issue_62s_targets_are_checked_on_the_adopted_point(load_tool):
+    verdict = load_tool("studies/geometry/verdict")
+    good = {**point((-0.05, 0.37), 14.0, holding=4), "plausible_cells": 6}
+    good["claims"][5] = "holds in part"
+    assert verdict.targets_met(good) == {"D": True, "plausible_cells": True, "claims": True}
+    assert verdict.targets_met({**good, "D": 15.5})["D"] is False
+    assert verdict.targets_met({**good, "plausible_cells": 5})["plausible_cells"] is False
+    assert verdict.targets_met({**good, "plausible_cells": None})["plausible_cells"] is False
+    assert verdict.targets_met({**good, "claims": {**good["claims"], 5: "does not hold"}})["claims"] is False
+    assert verdict.targets_met({**good, "claims": {**good["claims"], 3: "holds in part"}})["claims"] is False
+    got = verdict.decide([point((-0.05, 0.37), 20.0), {**good, "centre_m": [0.1, 0.45]}])
+    assert got["adopted"]["D"] == 14.0 and all(got["met"].values())
+    assert "for the adopted point: D ≤ 15: met;" in verdict.markdown(got, "cmd")
+
+
+def test_the_shown_table_is_the_points_section_of_its_fields_table(load_tool, tmp_path):
+    verdict = load_tool("studies/geometry/verdict")
+    folder = tmp_path / "eval" / "geometry_1"
+    folder.mkdir(parents=True)
+    frames = ("viscous_mirror", "viscous")
+    sections = [f"## Frame {f}, Recipe {r}: x\n\n| row {f} {r} |" for f in frames for r in (0, 1)]
+    (folder / "table2.md").write_text("# Table 2 — run\n\nThe intro.\n\n" + "\n\n".join(sections) + "\n")
+    text = verdict.table2(tmp_path, {**point((0.0, 0.4), 9.0), "folder": "geometry_1", "recipe": 1})
+    assert text.startswith("# Table 2 — ") and "The intro." in text
+    assert "| row viscous_mirror 1 |" in text and "row viscous_mirror 0" not in text and "row viscous " not in text
