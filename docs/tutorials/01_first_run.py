@@ -163,8 +163,9 @@ show(fig)
 # unstable one the field feeds energy in (+15.9 N s/m), and an arm stays stable there only with more damping than
 # that. Right, each network's damping along the two axes: the no-field beginners are damped about 40 N s/m along
 # the field's unstable axis, and the networks of the field have learned little yet. After 2,000,000 trials the
-# default's no-field networks end at 12.5 N s/m along it, below the field's +15.9, and it costs them 73 points of
-# success (`runs/frame_constant`).
+# bound 0.2 of config versions 14-15 leaves the no-field networks at 12.5 N s/m along it, below the field's +15.9,
+# and it costs them 73 points of success (`runs/frame_constant`); today's bound 0.25 leaves them at 21 N s/m, and
+# the field costs them 64 points (`runs/geometry_heldout`).
 
 # %%
 show(figures.impedance(results.json["impedance"], fig_data.gains, data.learners, data.cfg))
