@@ -188,8 +188,10 @@ FINISHED_RUNS = committed_runs()  # those still training, or stopped early (dev_
 # estimate from 25% to 75% of the run: inside the band in 73% of the updates), dev_gradual's trials lengthen in its
 # second quarter (+30-39%: 82%), and a late setback in dev_gain_mid (+93% from 75% to 90%: 43%). In geometry_map
 # every miss is in the last quarter, in its tail of 8 and then 4 learners, whose trials keep shortening: the truth
-# 35-51% under the estimate (inside the band in 84% of the updates from a quarter of the run).
-BAND_MISSES = {"dev_delayed", "dev_gradual", "dev_gain_mid", "geometry_map"}
+# 35-51% under the estimate (inside the band in 84% of the updates from a quarter of the run). Version 16's table2
+# misses in its last third, where its two slowest learners' trials first lengthen (to 88 steps) and then shorten
+# (to 35): the truth up to 42% under the estimate (the estimate 72% long), inside the band in 77% of the updates.
+BAND_MISSES = {"dev_delayed", "dev_gradual", "dev_gain_mid", "geometry_map", "table2"}
 
 
 @pytest.mark.parametrize(
@@ -223,12 +225,14 @@ def test_the_band_is_the_estimate_widened_early_and_narrowed_from_half_the_run()
     assert eta.update([1000.0], [10000.0], 100.0, 1) == 0.0 and eta.band is None  # done: no "(0–0 s)" range
 
 
-# runs/table2 since config version 14 (constant exploration, the field mirrored): its slowest learners' trials
-# shorten for most of the run, and from 5% of it the estimate runs up to 94% long (39% from half), beyond the guard.
+# runs/table2 since config version 16 (the bound 0.25): its two slowest learners' trials lengthen from about 50 to
+# 88 steps in the run's middle and shorten to 35 in its last third, and there the estimate runs up to 72% long (from
+# 5% of the run and from half alike: 20-24% in its first fifth), beyond the guard. Version 14's table2 missed it too
+# (94% long from 5%, 39% from half).
 ETA_LONG_EARLY = pytest.mark.xfail(
     strict=True,
-    reason="version 14's runs/table2: from 5% of the run the estimate runs up to 94% long, as its slowest learners' "
-    "trials keep shortening, which none of the three measures of steps per trial foresees",
+    reason="version 16's runs/table2: the estimate runs up to 72% long in the last third, as its slowest learners' "
+    "trials shorten after lengthening, which none of the three measures of steps per trial foresees",
 )
 
 
