@@ -135,6 +135,10 @@ def test_a_geometry_the_arm_cannot_serve_is_a_one_line_error_with_nothing_writte
     assert train_cli.main(["--trials", "10", "--out", str(out), *flags]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and "visual field centred at" in err[0], err
+    # It names what sets the field: a grid given, by its own name (a fuzzed config file found one unnamed).
+    swept = [f"train.{f.split('=')[0]}_grid" for f in flags if f.startswith("sensor_") and "," in f]
+    assert all(name in err[0] for name in ["learner.sensor_dx", "learner.sensor_dy", *swept]), err
+    assert ("_grid" in err[0]) == bool(swept), err
     assert not out.exists()
 
 

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from conftest import ARGV, final_arrays, metrics_without_wall, snapshot
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from reach_jax import errors, train
@@ -438,6 +438,7 @@ SECTIONS = {
 
 
 @settings(max_examples=300, deadline=None)
+@example(section="train", field="sensor_dx_grid", value=[True])  # a visual field out of reach, set by a grid
 @given(
     section=st.sampled_from(sorted(SECTIONS)),
     field=st.one_of(

@@ -246,13 +246,16 @@ def _check_train(cfg: Config) -> None:
 
 
 def _check_workspace(cfg: Config) -> None:
-    """Every sweep point's visual field lies where the arm reaches all of it inside its joint limits."""
+    """Each sweep point's visual field lies in the arm's reach inside its joint limits, or an error names the fields."""
+    names = workspace.GEOMETRY_HYPERS
+    setters = ["sensor.centre", "sensor.cell_size", *(f"learner.{n}" for n in names)]
+    setters += [f"train.{n}_grid" for n in names if getattr(cfg.train, f"{n}_grid")]
     for s in workspace.sweep_sensors(cfg):
         why = workspace.field_fault(s, cfg.arm)
         if why:
             raise ValueError(
                 f"sensor: the visual field centred at ({s.centre[0]:.3f}, {s.centre[1]:.3f}) m with "
-                f"{s.cell_size:.3f} m cells does not fit the arm: {why} (learner.sensor_dx, _dy, _scale move it)"
+                f"{s.cell_size:.3f} m cells does not fit the arm: {why} (set by {', '.join(setters)})"
             )
 
 
