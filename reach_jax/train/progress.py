@@ -91,12 +91,16 @@ class LearnerEta:
 
     Steps left are trials left x steps per trial, which changes as a learner learns and in its crises. Three
     measures of it each give an estimate: over the last `window` updates (follows a change), over the last
-    `long_window` (rides out a passing crisis) and over the learner's life (carries the slow fall of trial lengths);
-    the estimate is their geometric mean. Beside it, `band` is the range estimate x (1 +- width): the early width
-    until the estimate says that `late_from` of the run is done, the late one from then on. The widths are set by
-    replaying every committed run's metrics (tests/test_progress.py), where the truth strays from the estimate by up
-    to a third for long stretches as learners speed up or slow down; the spread of the three measures did not foretell
-    those errors, so it does not set the width.
+    `long_window` (rides out a passing crisis) and over the learner's life (carries the slow fall of trial lengths).
+    A learner far from the batch's median steps per trial tends to return to it (a lagging learner's crisis passes),
+    but not always (a collapsed one stays slow), so each measure r is also relaxed toward the median m over
+    `regress` of the budget: r(tau) = m + (r - m) exp(-tau / T) for its tau-th trial to come; the estimate is the
+    geometric mean of the three measures' own and relaxed estimates, the relaxed ones weighted `regress_weight`.
+    Beside it, `band` is the range estimate / (1 + width) to estimate x (1 + width): the early width until the
+    estimate says that `late_from` of the run is done, the late one from then on. The widths are set by replaying
+    every committed run's metrics (tests/test_progress.py), where the truth strays from the estimate by up to a third
+    for long stretches as learners speed up or slow down; the spread of the measures did not foretell those errors,
+    so it does not set the width.
 
     A step at batch size n costs a + b ceil(n / devices): one device's share of the learners plus a fixed cost, a =
     fixed_learners x b until two per-device sizes are measured (`seconds_per_step`); a measured size costs the
@@ -114,8 +118,10 @@ class LearnerEta:
         min_done: float = 0.05,
         recent_chunks: int = 5,
         early_width: float = 0.6,
-        late_width: float = 0.35,
+        late_width: float = 0.4,
         late_from: float = 0.4,
+        regress: float = 0.1,
+        regress_weight: float = 0.5,
     ):
         """Args:
         budget: trials per learner.
@@ -126,9 +132,13 @@ class LearnerEta:
           step for 8, 32 and 128 learners on 2 devices); far more on a GPU, where the fixed cost dominates.
         min_done: the share of the run, by its own estimate, before which none is given.
         recent_chunks: chunks of one batch size whose median step time prices it.
-        early_width, late_width: the band's half-width as a fraction of the estimate, before and from `late_from`
-          of the run by the estimate's own reckoning: 0.4, since the estimate runs up to a quarter long, so that the
-          band is narrow from the true half of every committed run on.
+        early_width, late_width: the band's width (a ratio less one) before and from `late_from` of the run by the
+          estimate's own reckoning: 0.4 (a half-width of 34% of the estimate), so that the band is narrow from the
+          true half of every committed run on.
+        regress: the time constant of the relaxation toward the batch's median steps per trial, a share of the
+          budget; 0 relaxes nothing.
+        regress_weight: the relaxed estimates' weight in the geometric mean. Both were chosen by replaying the
+          committed runs outside the tests' list (benchmarks/results/eta-replay-20261208.json).
         """
         self.budget = budget
         self.devices = max(int(devices), 1)
@@ -140,6 +150,8 @@ class LearnerEta:
         self.recent_chunks = recent_chunks
         self.step_times: dict[int, deque] = {}  # batch size -> seconds per step in its newest chunks
         self.widths, self.late_from = (early_width, late_width), late_from
+        self.regress, self.regress_weight = regress * budget, regress_weight
+        self.latest_rate: np.ndarray | None = None  # (L,) steps per trial over each learner's newest window
         self.band: tuple[float, float] | None = None  # (low, high) [s] around the latest estimate; None without one
 
     def update(self, trials, steps, now: float, batch_size: int) -> float | None:
@@ -154,7 +166,7 @@ class LearnerEta:
         if seconds:
             elapsed = now - self.start
             width = self.widths[int(elapsed >= self.late_from * (elapsed + seconds))]
-            self.band = (seconds * (1.0 - width), seconds * (1.0 + width))
+            self.band = (seconds / (1.0 + width), seconds * (1.0 + width))
         return seconds
 
     def _estimate(self, trials, steps, now: float, batch_size: int) -> float | None:
@@ -174,14 +186,28 @@ class LearnerEta:
         if not busy.any():
             return 0.0
         recent = self.history[max(len(self.history) - 1 - self.window, 0)]
-        if not self.step_times or np.any((trials - recent[1])[busy] <= 0):
+        moved = trials - recent[1] > 0
+        rate = self._steps_per_trial(trials, steps, recent)
+        latest = np.full(len(trials), np.nan) if self.latest_rate is None else self.latest_rate
+        self.latest_rate = np.where(moved, rate, latest)  # a finished learner keeps its last window with trials
+        if not self.step_times or np.any(~moved[busy]):
             return None
-        per_trial = [self._steps_per_trial(trials, steps, point)[busy] for point in (recent, self.history[0])]
+        median = float(np.nanmedian(self.latest_rate))  # finished learners count at their last measure
+        per_trial = [rate[busy], self._steps_per_trial(trials, steps, self.history[0])[busy]]
         per_trial.append((steps / np.maximum(trials, 1.0))[busy])
-        estimates = [self._seconds(left[busy] * rate, len(trials)) for rate in per_trial]
-        seconds = float(np.exp(np.mean(np.log(np.maximum(estimates, 1e-9)))))
+        logs, weights = [], (1.0 - self.regress_weight, self.regress_weight)
+        for r in per_trial:
+            for steps_left in (left[busy] * r, self._relaxed(r, median, left[busy])):
+                logs.append(np.log(max(self._seconds(steps_left, len(trials)), 1e-9)))
+        seconds = float(np.exp(np.average(logs, weights=weights * len(per_trial))))
         elapsed = now - self.start
         return seconds if elapsed >= self.min_done * (elapsed + seconds) else None
+
+    def _relaxed(self, rate: np.ndarray, median: float, trials_left: np.ndarray) -> np.ndarray:
+        """Steps left [steps] (L,) if steps per trial relax from `rate` (L,) to `median` over `regress` trials."""
+        if self.regress <= 0:
+            return trials_left * rate
+        return median * trials_left + (rate - median) * self.regress * -np.expm1(-trials_left / self.regress)
 
     @staticmethod
     def _steps_per_trial(trials, steps, since) -> np.ndarray:
