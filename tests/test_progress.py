@@ -214,10 +214,10 @@ def band_record(run: str) -> tuple[float, float]:
 FINISHED_RUNS = committed_runs()  # those still training, or stopped early (dev_anneal), are skipped: no end to count to
 # Where the truth strays from the estimate by more than the band for long, for reasons the trial lengths before it
 # do not show, the estimate short throughout: dev_delayed's anneal to half the noise lengthens its trials after
-# mid-run (the estimate 31-41% short from a quarter to the end: inside the band in 35% of the updates), dev_gradual's
+# mid-run (the estimate 32-41% short from a quarter to the end: inside the band in 35% of the updates), dev_gradual's
 # trials lengthen in its second quarter (32-36% short through its middle: 69%), a late setback in dev_gain_mid (43-63%
 # short from 70%: 37%), and collapse_dev's collapsed learners never return to the batch's median, as the relaxation
-# toward it expects (20-35% short from a tenth on: 73%). Before the relaxation (config version 16's first days)
+# toward it expects (19-35% short from a tenth on: 73%). Before the relaxation (commit 2a512ad)
 # table2 (77%) and geometry_map (84%) missed instead of collapse_dev, and dev_delayed held the truth in 73%,
 # dev_gradual in 82% and dev_gain_mid in 43% of the updates (benchmarks/results/eta-replay-20261208.json).
 BAND_MISSES = {"collapse_dev", "dev_delayed", "dev_gain_mid", "dev_gradual"}

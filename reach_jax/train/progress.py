@@ -133,12 +133,12 @@ class LearnerEta:
         min_done: the share of the run, by its own estimate, before which none is given.
         recent_chunks: chunks of one batch size whose median step time prices it.
         early_width, late_width: the band's width (a ratio less one) before and from `late_from` of the run by the
-          estimate's own reckoning: 0.4 (a half-width of 34% of the estimate), so that the band is narrow from the
-          true half of every committed run on.
+          estimate's own reckoning; the late one 0.4 (a half-width of 34% of the estimate), so that the band is
+          narrow from the true half of every committed run on.
         regress: the time constant of the relaxation toward the batch's median steps per trial, a share of the
           budget; 0 relaxes nothing.
-        regress_weight: the relaxed estimates' weight in the geometric mean. Both were chosen by replaying the
-          committed runs outside the tests' list (benchmarks/results/eta-replay-20261208.json).
+        regress_weight: the relaxed estimates' weight in the geometric mean. Both were chosen on a grid replayed
+          over every finished committed run (benchmarks/results/eta-replay-20261208.json, docs/how-it-works.md).
         """
         self.budget = budget
         self.devices = max(int(devices), 1)
