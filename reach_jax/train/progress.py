@@ -196,9 +196,10 @@ class LearnerEta:
         per_trial = [rate[busy], self._steps_per_trial(trials, steps, self.history[0])[busy]]
         per_trial.append((steps / np.maximum(trials, 1.0))[busy])
         logs, weights = [], (1.0 - self.regress_weight, self.regress_weight)
+        prices = self._step_prices(int(busy.sum()), len(trials))
         for r in per_trial:
             for steps_left in (left[busy] * r, self._relaxed(r, median, left[busy])):
-                logs.append(np.log(max(self._seconds(steps_left, len(trials)), 1e-9)))
+                logs.append(np.log(max(self._seconds(steps_left, prices), 1e-9)))
         seconds = float(np.exp(np.average(logs, weights=weights * len(per_trial))))
         elapsed = now - self.start
         return seconds if elapsed >= self.min_done * (elapsed + seconds) else None
@@ -214,14 +215,16 @@ class LearnerEta:
         _, trials_then, steps_then = since
         return (steps - steps_then) / np.maximum(trials - trials_then, 1e-9)
 
-    def _seconds(self, steps_left: np.ndarray, n_learners: int) -> float:
-        sizes = [pow2_batch(k, n_learners) for k in range(len(steps_left), 0, -1)]
+    def _step_prices(self, busy: int, n_learners: int) -> np.ndarray:
+        """Time of a step [s] while the k-th of `busy` unfinished learners finishes, k = 1..busy (`_seconds`)."""
+        sizes = [pow2_batch(k, n_learners) for k in range(busy, 0, -1)]
         price = {n: self.seconds_per_step(n) for n in set(sizes)}  # a few powers of two, each priced once
-        seconds, done = 0.0, 0.0
-        for size, s in zip(sizes, np.sort(steps_left), strict=True):
-            seconds += (s - done) * price[size]
-            done = s
-        return seconds
+        return np.array([price[n] for n in sizes])
+
+    @staticmethod
+    def _seconds(steps_left: np.ndarray, prices: np.ndarray) -> float:
+        """Time [s] until the last of the learners with `steps_left` (L,) is done, at `prices` (`_step_prices`)."""
+        return float(np.diff(np.sort(steps_left), prepend=0.0) @ prices)
 
     def seconds_per_step(self, size: int) -> float:
         """Time of one step at batch `size` [s]: measured (the median of its newest chunks), else
