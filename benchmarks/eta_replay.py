@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import test_progress as tp  # noqa: E402  (the tests' replay: committed profiles, fake clock, batch sizes)
 from conftest import committed_runs  # noqa: E402
 
+# (regress, regress_weight): no relaxation (the estimator before it), then time constants x weights
 GRID = [(0.0, 0.0)] + [(r, w) for r in (0.05, 0.1, 0.2, 0.4) for w in (0.25, 0.5, 0.75, 1.0)]
 
 
