@@ -1,9 +1,11 @@
 """Replays every finished committed run's trial counts through the progress bar's estimator (`LearnerEta`) on the
 tests' fake clock, over a grid of its relaxation toward the batch's median (`regress`, `regress_weight`).
 
-For each grid point and run: the worst error of the estimate from 5% and from half of the run, and the share of the
-updates from a quarter of the run whose true time left lies in the band. The tests' list of runs
-(`tests/test_progress.py`'s COMMITTED_RUNS) is reported apart from the others.
+For each grid point and run, by the tests' own replays (`tests/test_progress.py`): the worst error of the estimate
+from 5% and from half of the run, and the share of the updates from a quarter of the run whose true time left lies in
+the band; the tests' list of runs (COMMITTED_RUNS) is summed apart from the others. Beside them, per grid point, the
+tests' two other replays: runs/dev_gain on its own wall clock and the simulated run whose learners' differences
+persist.
 
     python benchmarks/eta_replay.py            # writes benchmarks/results/eta-replay-<date>.json
 """
@@ -33,36 +35,34 @@ GRID = [(0.0, 0.0)] + [(r, w) for r in (0.05, 0.1, 0.2, 0.4) for w in (0.25, 0.5
 
 
 def replay(run: str, regress: float, weight: float) -> dict | None:
-    """One run's record under one grid point: worst errors from 5% and half, band coverage from a quarter."""
-    trials, steps, budget, _ = tp.committed_profile(run)
+    """One run's record under one grid point, by the tests' replays (None for a run not finished): worst errors from
+    5% and half, band coverage from a quarter, the band's widest half-width from half."""
+    trials, _, budget, _ = tp.committed_profile(run)
     if not (trials[-1] >= budget).all():
         return None
-    clock, sizes = tp.fake_clock(run), tp.batch_sizes(trials, budget)
-    eta = LearnerEta(budget, devices=2, regress=regress, regress_weight=weight)
-    eta.update(np.zeros(trials.shape[1]), np.zeros(trials.shape[1]), 0.0, sizes[0])
-    worst, inside, judged = {0.05: 0.0, 0.5: 0.0}, 0, 0
-    for now, t, s, size, took in zip(clock, trials, steps, sizes, np.diff(clock, prepend=0.0), strict=True):
-        got, left = eta.update(t, s, now, size), clock[-1] - now
-        if got is None or left <= took:
-            continue
-        if abs(got - left) > took:  # as the tests: an error within one chunk's time is none
-            for start in worst:
-                if now >= start * clock[-1]:
-                    worst[start] = max(worst[start], abs(got / left - 1))
-        if now >= 0.25 * clock[-1]:
-            judged += 1
-            inside += eta.band[0] - took <= left <= eta.band[1] + took
+    settings = {"regress": regress, "regress_weight": weight}
+    worst = tp.worst_eta_errors(run, tp.fake_clock(run), **settings)
+    coverage, widest = tp.band_record(run, **settings)
+    return {"from_5pct": worst[0.05], "from_half": worst[0.5], "band_coverage": coverage, "band_widest": widest}
+
+
+def other_checks(regress: float, weight: float) -> dict:
+    """The tests' other replays under one grid point: runs/dev_gain on its own wall clock (worst from half and from
+    85%), and the simulated run of persistent differences on clocks whose step is `fixed` of its cost at 8 learners
+    (worst from half)."""
+    real = tp.worst_eta_errors(
+        "dev_gain", tp.wall_clock("dev_gain"), (0.5, 0.85), regress=regress, regress_weight=weight
+    )
     return {
-        "from_5pct": float(worst[0.05]),
-        "from_half": float(worst[0.5]),
-        "band_coverage": float(inside / max(judged, 1)),
+        "dev_gain_wall_clock": {"from_half": real[0.5], "from_85pct": real[0.85]},
+        "simulated_from_half": {str(f): tp.simulated_errors(f, regress)[0] for f in (0.5, 0.65, 0.8, 1.0)},
     }
 
 
 def grid_point(point: tuple[float, float]) -> dict:
     """Every finished committed run's record under one grid point."""
     runs = {run: replay(run, *point) for run in committed_runs()}
-    return {run: record for run, record in runs.items() if record is not None}
+    return {"runs": {run: record for run, record in runs.items() if record is not None}, **other_checks(*point)}
 
 
 def summary(records: dict) -> dict:
@@ -97,7 +97,7 @@ def main() -> None:
         "command": "python benchmarks/eta_replay.py",
         "default": {name: signature[name].default for name in ("regress", "regress_weight")},
         "grid": [
-            {"regress": r, "regress_weight": w, "summary": summary(records[r, w]), "runs": records[r, w]}
+            {"regress": r, "regress_weight": w, "summary": summary(records[r, w]["runs"]), **records[r, w]}
             for r, w in GRID
         ],
     }

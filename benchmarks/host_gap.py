@@ -8,6 +8,7 @@ its tail), with `loop.dispatch` and `interrupt.wait_ready` timed. Per chunk afte
 predecessor's states being ready to its own dispatch returning (the copy to the host, the merge, the next inputs,
 the dispatch; the metrics, the checkpoint and the bar come after it, while the devices work). XLA:CPU runs a
 program on one device inline, in the dispatching call, so a one-learner chunk idles for its period less that call.
+The median time the dispatch call takes to return is kept beside them.
 The idle medians, weighted by the chunks of each batch size in the table2-run JSON given by --against (the
 README's run), give the share of that run the devices waited for the host. Run it on a quiet machine. Writes
 benchmarks/results/host-gap-<UTC time>.json.
@@ -56,18 +57,20 @@ def timed_run(cfg, events: dict) -> dict:
         loop.run(cfg, Path(scratch) / "run", stream=io.StringIO())
         wall = time.perf_counter() - start
     sent, ready = events["dispatch"], events["wait_ready"]
-    idle, periods = [], []
+    idle, periods, calls = [], [], []
     for i in range(SKIP, len(sent) - 1):
         period, call = sent[i + 1][0] - sent[i][0], sent[i][1] - sent[i][0]
         inline = call > period / 2  # the chunk ran inside its dispatch call
         idle.append(1e3 * (period - call if inline else sent[i + 1][1] - ready[i][1]))
         periods.append(1e3 * period)
+        calls.append(1e3 * call)
     return {
         "chunks": len(sent),
         "wall_s": wall,
         "idle_ms_median": statistics.median(idle),
         "idle_ms_p90": sorted(idle)[int(0.9 * len(idle))],
         "period_ms_median": statistics.median(periods),
+        "dispatch_call_ms_median": statistics.median(calls),
     }
 
 
@@ -101,8 +104,9 @@ def main(argv=None) -> int:
         train = dataclasses.replace(cfg.train, trials=int(args.trials), **fields)
         runs[str(size)] = r = timed_run(dataclasses.replace(cfg, train=train), events)
         print(
-            f"{size} learners: {r['chunks']} chunks, the devices idle {r['idle_ms_median']:.2f} ms (median; p90 "
-            f"{r['idle_ms_p90']:.2f}) of a {r['period_ms_median']:.1f} ms chunk"
+            f"batch {size}: {r['chunks']} chunks, the devices idle {r['idle_ms_median']:.2f} ms (median; p90 "
+            f"{r['idle_ms_p90']:.2f}) of a {r['period_ms_median']:.1f} ms chunk; the dispatch call "
+            f"{r['dispatch_call_ms_median']:.2f} ms"
         )
     composition = json.loads(args.against.read_text())["batch_step_us"]
     idle_s = sum(runs[n]["idle_ms_median"] / 1e3 * composition[n]["chunks"] for n in runs)

@@ -53,20 +53,26 @@ PERSISTENT_ON_A_GPU = pytest.mark.xfail(
     + [(fixed, 0.0) for fixed in (0.5, 0.65, 0.8, 1.0)],
 )
 def test_eta_is_within_a_quarter_of_the_truth_from_half_the_run_despite_repacking(fixed, regress):
+    worst, checked = simulated_errors(fixed, regress)
+    assert checked > 20
+    assert worst <= 0.25, worst
+
+
+def simulated_errors(fixed: float, regress: float) -> tuple[float, int]:
+    """The estimate's largest relative error from half of `simulated_run` on (more than two chunks before its end),
+    and the updates judged; it ends at 0 once every learner is done."""
     rows = simulated_run(budget=2000.0, fixed=fixed)
     end = rows[-1][0]
     assert len({size for *_, size in rows}) == 4  # the batch shrank 8 -> 4 -> 2 -> 1
-    eta, checked = LearnerEta(2000, devices=2, regress=regress), 0
-    start_trials, start_steps = np.zeros(8), np.zeros(8)
-    eta.update(start_trials, start_steps, 0.0, 8)
+    eta, checked, worst = LearnerEta(2000, devices=2, regress=regress), 0, 0.0
+    eta.update(np.zeros(8), np.zeros(8), 0.0, 8)
     for now, trials, steps, size in rows:
         got = eta.update(trials, steps, now, size)
         left = end - now
         if now >= 0.5 * end and left >= 2 * (rows[-1][0] - rows[-2][0]):
-            assert got == pytest.approx(left, rel=0.25), (now / end, got, left)
-            checked += 1
-    assert checked > 20
+            worst, checked = max(worst, abs(got / left - 1)), checked + 1
     assert got == 0.0  # every learner done
+    return worst, checked
 
 
 def test_eta_follows_the_slowest_learner_at_a_constant_step_time():
@@ -168,12 +174,13 @@ def batch_sizes(trials: np.ndarray, budget: int) -> list[int]:
     return [pow2_batch(int(np.sum(before < budget)), n) for before in [np.zeros(n), *trials[:-1]]]
 
 
-def worst_eta_errors(run: str, clock: np.ndarray, starts=(0.05, 0.5)) -> dict[float, float]:
+def worst_eta_errors(run: str, clock: np.ndarray, starts=(0.05, 0.5), **settings) -> dict[float, float]:
     """Replays a committed run's trials and steps at the chunk end times `clock` [s]: the largest relative error of
-    the estimate from each share of the run in `starts`. Errors within one chunk's time are not counted."""
+    the estimate (`LearnerEta` with `settings`) from each share of the run in `starts`. Errors within one chunk's
+    time are not counted."""
     trials, steps, budget, _ = committed_profile(run)
     sizes = batch_sizes(trials, budget)
-    eta = LearnerEta(budget, devices=2)
+    eta = LearnerEta(budget, devices=2, **settings)
     eta.update(np.zeros(trials.shape[1]), np.zeros(trials.shape[1]), 0.0, sizes[0])
     worst = dict.fromkeys(starts, 0.0)
     for now, t, s, size, took in zip(clock, trials, steps, sizes, np.diff(clock, prepend=0.0), strict=True):
@@ -187,14 +194,15 @@ def worst_eta_errors(run: str, clock: np.ndarray, starts=(0.05, 0.5)) -> dict[fl
     return worst
 
 
-def band_record(run: str) -> tuple[float, float]:
-    """Replays a committed run at its fake clock: the share of the updates from a quarter of the run on whose true
-    time left lies in the band (within one chunk's time), and the band's widest half-width from half of the run."""
+def band_record(run: str, **settings) -> tuple[float, float]:
+    """Replays a committed run at its fake clock (`LearnerEta` with `settings`): the share of the updates from a
+    quarter of the run on whose true time left lies in the band (within one chunk's time), and the band's widest
+    half-width from half of the run."""
     trials, steps, budget, _ = committed_profile(run)
     if not (trials[-1] >= budget).all():
         pytest.skip(f"runs/{run} has not finished its trials")
     clock, sizes = fake_clock(run), batch_sizes(trials, budget)
-    eta = LearnerEta(budget, devices=2)
+    eta = LearnerEta(budget, devices=2, **settings)
     eta.update(np.zeros(trials.shape[1]), np.zeros(trials.shape[1]), 0.0, sizes[0])
     inside, judged, widest = 0, 0, 0.0
     for now, t, s, size, took in zip(clock, trials, steps, sizes, np.diff(clock, prepend=0.0), strict=True):

@@ -150,7 +150,7 @@ class LearnerEta:
         self.recent_chunks = recent_chunks
         self.step_times: dict[int, deque] = {}  # batch size -> seconds per step in its newest chunks
         self.widths, self.late_from = (early_width, late_width), late_from
-        self.regress, self.regress_weight = regress * budget, regress_weight
+        self.regress_trials, self.regress_weight = regress * budget, regress_weight
         self.latest_rate: np.ndarray | None = None  # (L,) steps per trial over each learner's newest window
         self.band: tuple[float, float] | None = None  # (low, high) [s] around the latest estimate; None without one
 
@@ -206,9 +206,10 @@ class LearnerEta:
 
     def _relaxed(self, rate: np.ndarray, median: float, trials_left: np.ndarray) -> np.ndarray:
         """Steps left [steps] (L,) if steps per trial relax from `rate` (L,) to `median` over `regress` trials."""
-        if self.regress <= 0:
+        tau = self.regress_trials
+        if tau <= 0:
             return trials_left * rate
-        return median * trials_left + (rate - median) * self.regress * -np.expm1(-trials_left / self.regress)
+        return median * trials_left + (rate - median) * tau * -np.expm1(-trials_left / tau)
 
     @staticmethod
     def _steps_per_trial(trials, steps, since) -> np.ndarray:
